@@ -1,0 +1,223 @@
+"""The paper's controllers (Sections III-IV), batched, with the SPEC §3 corrections.
+
+Every function works element-wise on arrays of any (matching) shape, so the
+same code serves the built-in inner loops of the environment (evaluated at
+every RK4 stage, shapes ``(B, N)``) and the reference policy (evaluated once
+per control period on per-agent observations).
+
+Two equations of the printed paper contradict the paper's own error dynamics
+and are corrected here (SPEC §3); ``as_printed=True`` runs them as printed so
+the difference can be shown:
+
+* Surge law (11) lacks the damping compensation ``(d11/m11)·u_c``; as printed,
+  the closed loop is ``ũ̇ = −k_u·ũ − (d11/m11)·u`` and the vessels settle at
+  ``u = k_u·u_c/(k_u + d11/m11)`` (4.889 m/s for the supply vessel at 5 m/s)
+  instead of ``u_c``.
+* The LOS feed-forward in (14) has the wrong sign: the printed
+  ``+Δ/(e²+Δ²)·ẏ`` is minus the derivative of ψ_LOS in (12), so (16) does not
+  hold. The corrected ``ψ̇_LOS = −Δ·ẏ/(e²+Δ²)`` is used.
+
+Angles in heading errors are wrapped to ``[−π, π)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from marine_formation_env.dynamics import accelerations, wrap_angle
+from marine_formation_env.params import Gains, VesselParams
+
+__all__ = [
+    "consensus_speed",
+    "heading_tracking_inputs",
+    "heading_yaw_reference",
+    "los_angle",
+    "los_yaw_reference",
+    "path_following_inputs",
+    "saturation",
+    "saturation_slope",
+    "surge_law",
+    "yaw_law",
+]
+
+
+def saturation(s: np.ndarray | float, a: float) -> np.ndarray:
+    """The consensus nonlinearity ``g(s) = (2a/π)·atan(s)`` ∈ (−a, a) of (20)."""
+    return (2.0 * a / np.pi) * np.arctan(s)
+
+
+def saturation_slope(s: np.ndarray | float, a: float) -> np.ndarray:
+    """``g'(s) = (2a/π)/(1 + s²)``."""
+    return (2.0 * a / np.pi) / (1.0 + np.square(s))
+
+
+def consensus_speed(
+    s: np.ndarray,
+    s_dot: np.ndarray,
+    u_d: np.ndarray | float,
+    u_d_dot: np.ndarray | float,
+    a: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coordination law (20) and its time derivative.
+
+    Args:
+        s: ``s_j = Σ_{i∈A_j} (x_j − x_i − d_ji)`` [m].
+        s_dot: ``ṡ_j = Σ_{i∈A_j} (ẋ_j − ẋ_i)`` [m/s].
+        u_d, u_d_dot: desired formation speed [m/s] and its rate [m/s²].
+        a: saturation level of g [m/s].
+
+    Returns:
+        ``(u_c, u̇_c)``: commanded surge speed [m/s] and its rate [m/s²].
+        Under (19), ``u_c ∈ (U_min, U_max)`` for every argument.
+    """
+    u_c = u_d - saturation(s, a)
+    u_c_dot = u_d_dot - saturation_slope(s, a) * s_dot
+    return u_c, u_c_dot
+
+
+def los_angle(e: np.ndarray, delta: float) -> np.ndarray:
+    """LOS guidance (12): ``ψ_LOS = −atan(e/Δ)`` [rad], ``e = y − D_y`` [m]."""
+    return -np.arctan(e / delta)
+
+
+def surge_law(
+    p: VesselParams,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_c: np.ndarray,
+    u_c_dot: np.ndarray | float,
+    k_u: float,
+    as_printed: bool = False,
+) -> np.ndarray:
+    """Surge acceleration input τ_u [m/s²] of (11), corrected (SPEC §3).
+
+    ``τ_u = −(m22·v + m23·r)·r/m11 + (d11/m11)·u_c + u̇_c − k_u·(u − u_c)``
+    gives ``ũ̇ = −(k_u + d11/m11)·ũ``. With ``as_printed=True`` the
+    ``(d11/m11)·u_c`` term is dropped, as in the printed (11).
+    """
+    tau = -(p.m22 * v + p.m23 * r) * r / p.m11 + u_c_dot - k_u * (u - u_c)
+    if not as_printed:
+        tau = tau + (p.d11 / p.m11) * u_c
+    return tau
+
+
+def yaw_law(
+    p: VesselParams,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    r_d: np.ndarray,
+    r_d_dot: np.ndarray,
+    k_r: float,
+) -> np.ndarray:
+    """Yaw acceleration input τ_r [rad/s²] of (13): gives ``ṙ = ṙ_d − k_r·(r − r_d)``."""
+    _, _, a_r = accelerations(p, u, v, r)
+    return -a_r + r_d_dot - k_r * (r - r_d)
+
+
+def los_yaw_reference(
+    p: VesselParams,
+    e: np.ndarray,
+    psi: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    tau_u: np.ndarray,
+    gains: Gains,
+    as_printed: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Desired yaw rate (14), corrected, and its derivative (SPEC §3).
+
+    ::
+
+        ψ̇_LOS = −Δ·ẏ/(e² + Δ²),                      ẏ = u sin ψ + v cos ψ
+        r_d   = ψ̇_LOS − k_ψ·(ψ − ψ_LOS)
+        ṙ_d   = ψ̈_LOS − k_ψ·(r − ψ̇_LOS)
+        ψ̈_LOS = −Δ·ÿ/(e² + Δ²) + 2·Δ·e·ẏ²/(e² + Δ²)²
+        ÿ     = u̇ sin ψ + u·r cos ψ + v̇ cos ψ − v·r sin ψ
+
+    with ``u̇`` from ``tau_u`` and ``v̇`` from the model. With
+    ``as_printed=True`` the feed-forward term takes the printed sign
+    (``+Δ·ẏ/(e² + Δ²)``) and ``ṙ_d`` is the exact derivative of that printed
+    ``r_d``, so only the printed formula differs.
+
+    Returns:
+        ``(r_d, ṙ_d)`` [rad/s, rad/s²].
+    """
+    delta = gains.delta
+    c, s = np.cos(psi), np.sin(psi)
+    a_u, v_dot, _ = accelerations(p, u, v, r)
+    u_dot = a_u + tau_u
+    y_dot = u * s + v * c
+    y_ddot = u_dot * s + u * r * c + v_dot * c - v * r * s
+    den = e * e + delta * delta
+    psi_los_dot = -delta * y_dot / den
+    psi_los_ddot = -delta * y_ddot / den + 2.0 * delta * e * y_dot * y_dot / (den * den)
+    heading_error = wrap_angle(psi - los_angle(e, delta))
+    if as_printed:
+        feed, feed_dot = -psi_los_dot, -psi_los_ddot
+    else:
+        feed, feed_dot = psi_los_dot, psi_los_ddot
+    r_d = feed - gains.k_psi * heading_error
+    r_d_dot = feed_dot - gains.k_psi * (r - psi_los_dot)
+    return r_d, r_d_dot
+
+
+def heading_yaw_reference(
+    psi: np.ndarray, r: np.ndarray, psi_d: np.ndarray, k_psi: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Desired yaw rate for a held heading command ψ_d (the ``guidance`` level).
+
+    ``r_d = −k_ψ·(ψ − ψ_d)`` and, with ψ_d constant over the control period,
+    ``ṙ_d = −k_ψ·r``. This is (14) with the LOS angle replaced by ψ_d.
+    """
+    return -k_psi * wrap_angle(psi - psi_d), -k_psi * r
+
+
+def path_following_inputs(
+    p: VesselParams,
+    gains: Gains,
+    e: np.ndarray,
+    psi: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_c: np.ndarray,
+    u_c_dot: np.ndarray | float,
+    as_printed: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The paper's complete path-following controller: (11) + (12)-(14) + (13).
+
+    Args:
+        e: cross-track error ``y − D_y`` [m].
+        psi, u, v, r: own heading [rad] and body velocities.
+        u_c, u_c_dot: commanded surge speed [m/s] and its rate [m/s²].
+
+    Returns:
+        ``(τ_u, τ_r)`` [m/s², rad/s²].
+    """
+    tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u, as_printed)
+    r_d, r_d_dot = los_yaw_reference(p, e, psi, u, v, r, tau_u, gains, as_printed)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r)
+
+
+def heading_tracking_inputs(
+    p: VesselParams,
+    gains: Gains,
+    psi: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_c: np.ndarray,
+    psi_d: np.ndarray,
+    as_printed: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Surge (11) and yaw (13) loops tracking a held ``(u_c, ψ_d)`` command.
+
+    Returns:
+        ``(τ_u, τ_r)`` [m/s², rad/s²].
+    """
+    tau_u = surge_law(p, u, v, r, u_c, 0.0, gains.k_u, as_printed)
+    r_d, r_d_dot = heading_yaw_reference(psi, r, psi_d, gains.k_psi)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r)

@@ -1,0 +1,342 @@
+"""The batched simulation: the only place that holds step logic.
+
+:class:`FormationCore` advances ``B`` independent formations of ``N`` vessels
+at once. It owns the state ``(B, N, 6)`` and does, per control period:
+map the normalized actions to physical commands, integrate ``substeps`` RK4
+steps of the closed loop (the built-in inner controllers of the action level
+are part of the vector field, so they act at every RK4 stage), then compute the
+masked observations, rewards, terminations and truncations as arrays.
+
+It holds no random generator: initial states are sampled from a generator the
+caller passes in (:meth:`FormationCore.sample_initial_state`). Every front end
+(PettingZoo env, gymnasium views, vector env) is a thin view of this class.
+
+Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, SPEC §7)::
+
+    own   0 e_j = y_j − D_yj                 [m]
+          1 ψ_j wrapped to [−π, π)           [rad]
+          2 u_j   3 v_j                      [m/s]
+          4 r_j                              [rad/s]
+          5 u_d(t)                           [m/s]
+          6 u̇_d(t)                           [m/s²]
+    slot k = 0…N−2 holds vessel i = (j + k + 1) mod N:
+          0 link bit: 1 iff i ∈ A_j (i transmits to j)
+          1 (x_j − D_xj) − (x_i − D_xi)      [m]     (0 if no link)
+          2 ẋ_j − ẋ_i                        [m/s]   (0 if no link)
+          3 age of that data                 [s]     (0: ideal links)
+
+Slots are ordered relative to ``j`` so that one shared policy sees "the next
+vessel", "the one after" and so on in the same place for every vessel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
+from marine_formation_env.dynamics import PSI, R, U, V, X, Y, rk4_step, vessel_rhs, wrap_angle
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = [
+    "OWN_FEATURES",
+    "REWARD_COMPONENTS",
+    "SLOT_FEATURES",
+    "FormationCore",
+    "ObservationLayout",
+    "StepOutput",
+]
+
+OWN_FEATURES = ("cross_track_error", "heading", "surge", "sway", "yaw_rate", "desired_speed", "desired_speed_rate")
+SLOT_FEATURES = ("linked", "coordination_error", "velocity_difference", "age")
+REWARD_COMPONENTS = ("cross_track", "heading", "coordination", "speed", "effort", "terminal")
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Index arithmetic of the per-agent observation vector (see module docstring)."""
+
+    n_vessels: int
+
+    own: int = len(OWN_FEATURES)
+    slot: int = len(SLOT_FEATURES)
+
+    @property
+    def dim(self) -> int:
+        """Length of one agent's observation."""
+        return self.own + self.slot * (self.n_vessels - 1)
+
+    def slot_vessels(self, j: int) -> list[int]:
+        """The vessel held in each slot of vessel ``j``'s observation."""
+        n = self.n_vessels
+        return [(j + k + 1) % n for k in range(n - 1)]
+
+    def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Split ``(..., dim)`` observations into own ``(..., 7)`` and slots ``(..., N−1, 4)``."""
+        own = obs[..., : self.own]
+        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.n_vessels - 1, self.slot)
+        return own, slots
+
+
+@dataclass
+class StepOutput:
+    """What one batched step returns (all arrays have leading shape ``(B,)`` or ``(B, N)``).
+
+    Attributes:
+        observation: ``(B, N, dim)`` float32 masked observations.
+        reward: ``(B, N)`` per-vessel rewards.
+        terminated: ``(B,)`` collision or workspace exit.
+        truncated: ``(B,)`` time limit reached (and not terminated).
+        components: reward components, each ``(B, N)``; they sum to ``reward``.
+        commanded_speed: ``(B, N)`` u_c [m/s] applied (``speed``/``guidance``), else None.
+        collision: ``(B,)``; out_of_bounds: ``(B,)``.
+    """
+
+    observation: np.ndarray
+    reward: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    components: dict[str, np.ndarray]
+    commanded_speed: np.ndarray | None
+    collision: np.ndarray
+    out_of_bounds: np.ndarray
+
+
+def _bounded_cost(error: np.ndarray, sigma: float) -> np.ndarray:
+    z2 = np.square(error / sigma)
+    return z2 / (1.0 + z2)
+
+
+class FormationCore:
+    """``B`` formations of ``N`` vessels stepped together (see module docstring).
+
+    Args:
+        config: a validated :class:`ScenarioConfig`.
+        num_envs: number of formations ``B``.
+
+    Attributes:
+        state: ``(B, N, 6)`` float64, columns ``x, y, psi, u, v, r``.
+        time: ``(B,)`` simulated time [s].
+        steps: ``(B,)`` control periods since reset.
+    """
+
+    def __init__(self, config: ScenarioConfig, num_envs: int = 1) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer ≥ 1, got {num_envs!r}")
+        self.config = config
+        self.num_envs = int(num_envs)
+        self.n = config.n_vessels
+        self.layout = ObservationLayout(self.n)
+        self.action_dim = config.action_dim
+        n = self.n
+        self._dx = np.ascontiguousarray(config.formation[:, 0])
+        self._dy = np.ascontiguousarray(config.formation[:, 1])
+        self._slot_index = np.array([self.layout.slot_vessels(j) for j in range(n)], dtype=np.intp).reshape(n, n - 1)
+        self._slot_mask = config.graph.adjacency[np.arange(n)[:, None], self._slot_index].astype(float)
+        self._pairs = np.triu_indices(n, k=1)
+        self.state = np.zeros((self.num_envs, n, 6))
+        self.time = np.zeros(self.num_envs)
+        self.steps = np.zeros(self.num_envs, dtype=np.int64)
+
+    # ------------------------------------------------------------------ reset
+    def sample_initial_state(self, rng: np.random.Generator) -> np.ndarray:
+        """Nominal initial state plus uniform ``init_noise``, shape ``(N, 6)``.
+
+        Draws are rejected (up to 100 times) while two vessels start closer than
+        twice the safety distance.
+        """
+        cfg = self.config
+        nominal = np.array(cfg.initial_state)
+        if cfg.init_noise.is_zero:
+            return nominal
+        half = cfg.init_noise.as_array()
+        for _ in range(100):
+            candidate = nominal + rng.uniform(-1.0, 1.0, size=nominal.shape) * half
+            if self.n < 2 or self._min_separation(candidate[None])[0] > 2.0 * cfg.safety_distance:
+                return candidate
+        raise RuntimeError(
+            f"could not draw an initial state with vessels more than {2 * cfg.safety_distance} m apart "
+            f"in 100 tries; reduce init_noise ({cfg.init_noise}) or safety_distance"
+        )
+
+    def reset(self, initial_state: np.ndarray, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
+        """Set the state of formations ``env_ids`` (all if None) and return their observations.
+
+        Args:
+            initial_state: ``(N, 6)`` or ``(len(env_ids), N, 6)`` finite array.
+            env_ids: which formations to reset.
+        """
+        ids = slice(None) if env_ids is None else env_ids
+        target_shape = self.state[ids].shape
+        arr = np.asarray(initial_state, dtype=float)
+        if arr.shape != (self.n, 6) and arr.shape != target_shape:
+            raise ValueError(f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            bad = tuple(np.argwhere(~np.isfinite(arr))[0])
+            raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
+        self.state[ids] = arr
+        self.time[ids] = 0.0
+        self.steps[ids] = 0
+        return self.observe()[ids]
+
+    # ------------------------------------------------------------------- step
+    def physical_commands(self, actions: np.ndarray) -> dict[str, np.ndarray]:
+        """Map normalized actions ``(..., A)`` in [−1, 1] (clipped) to physical commands.
+
+        * ``force``: ``τ_u = a₀·tau_u_max`` [m/s²], ``τ_r = a₁·tau_r_max`` [rad/s²].
+        * ``guidance``: ``u_c = U_min + (a₀+1)/2·(U_max−U_min)`` [m/s], ``ψ_d = a₁·psi_max`` [rad].
+        * ``speed``: ``u_c`` as above.
+        """
+        cfg = self.config
+        a = np.clip(actions, -1.0, 1.0)
+        if cfg.action_level == "force":
+            return {"tau_u": a[..., 0] * cfg.tau_u_max, "tau_r": a[..., 1] * cfg.tau_r_max}
+        u_c = cfg.u_min + 0.5 * (a[..., 0] + 1.0) * (cfg.u_max - cfg.u_min)
+        if cfg.action_level == "guidance":
+            return {"u_c": u_c, "psi_d": a[..., 1] * cfg.psi_max}
+        return {"u_c": u_c}
+
+    def normalized_actions(self, **commands: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`physical_commands` (clipped to [−1, 1]), shape ``(..., A)``."""
+        cfg = self.config
+        if cfg.action_level == "force":
+            cols = [commands["tau_u"] / cfg.tau_u_max, commands["tau_r"] / cfg.tau_r_max]
+        else:
+            cols = [2.0 * (np.asarray(commands["u_c"]) - cfg.u_min) / (cfg.u_max - cfg.u_min) - 1.0]
+            if cfg.action_level == "guidance":
+                cols.append(np.asarray(commands["psi_d"]) / cfg.psi_max)
+        return np.clip(np.stack(np.broadcast_arrays(*cols), axis=-1), -1.0, 1.0)
+
+    def step(self, actions: np.ndarray) -> StepOutput:
+        """Advance every formation by one control period.
+
+        Args:
+            actions: ``(B, N, A)`` normalized actions; finite values outside
+                [−1, 1] are clipped.
+
+        Raises:
+            ValueError: wrong shape or a non-finite entry (named by index).
+        """
+        cfg = self.config
+        actions = np.asarray(actions, dtype=float)
+        expected = (self.num_envs, self.n, self.action_dim)
+        if actions.shape != expected:
+            raise ValueError(f"actions must have shape {expected} (formations, vessels, action dim), got {actions.shape}")
+        if not np.all(np.isfinite(actions)):
+            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
+            raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
+        commands = self.physical_commands(actions)
+        rhs = self._closed_loop(commands)
+        h = cfg.dt / cfg.substeps
+        state = self.state
+        for _ in range(cfg.substeps):
+            state = rk4_step(rhs, state, h)
+        self.state = state
+        self.time = self.time + cfg.dt
+        self.steps = self.steps + 1
+        return self._outputs(np.clip(actions, -1.0, 1.0), commands.get("u_c"))
+
+    def _closed_loop(self, commands: dict[str, np.ndarray]):  # type: ignore[no-untyped-def]
+        """The vector field of the vessels under the level's held command."""
+        cfg = self.config
+        p, gains, printed = cfg.params, cfg.gains, cfg.paper_as_printed
+        if cfg.action_level == "force":
+            tau_u, tau_r = commands["tau_u"], commands["tau_r"]
+            return lambda s: vessel_rhs(p, s, tau_u, tau_r)
+        u_c = commands["u_c"]
+        if cfg.action_level == "guidance":
+            psi_d = commands["psi_d"]
+
+            def rhs_guidance(s: np.ndarray) -> np.ndarray:
+                tau_u, tau_r = heading_tracking_inputs(
+                    p, gains, s[..., PSI], s[..., U], s[..., V], s[..., R], u_c, psi_d, printed
+                )
+                return vessel_rhs(p, s, tau_u, tau_r)
+
+            return rhs_guidance
+        dy = self._dy
+
+        def rhs_speed(s: np.ndarray) -> np.ndarray:
+            tau_u, tau_r = path_following_inputs(
+                p, gains, s[..., Y] - dy, s[..., PSI], s[..., U], s[..., V], s[..., R], u_c, 0.0, printed
+            )
+            return vessel_rhs(p, s, tau_u, tau_r)
+
+        return rhs_speed
+
+    # ------------------------------------------------------------ observation
+    def _along_track(self) -> tuple[np.ndarray, np.ndarray]:
+        s = self.state
+        psi, u, v = s[..., PSI], s[..., U], s[..., V]
+        theta = s[..., X] - self._dx
+        x_dot = u * np.cos(psi) - v * np.sin(psi)
+        return theta, x_dot
+
+    def observe(self) -> np.ndarray:
+        """Masked per-agent observations ``(B, N, dim)`` float32 (module docstring)."""
+        cfg = self.config
+        s = self.state
+        b, n = self.num_envs, self.n
+        out = np.zeros((b, n, self.layout.dim), dtype=np.float32)
+        out[..., 0] = s[..., Y] - self._dy
+        out[..., 1] = wrap_angle(s[..., PSI])
+        out[..., 2:5] = s[..., U:R + 1]
+        out[..., 5] = cfg.u_d.value(self.time)[:, None]
+        out[..., 6] = cfg.u_d.rate(self.time)[:, None]
+        theta, x_dot = self._along_track()
+        idx = self._slot_index
+        slots = out[..., self.layout.own :].reshape(b, n, n - 1, self.layout.slot)
+        slots[..., 0] = self._slot_mask
+        slots[..., 1] = self._slot_mask * (theta[:, :, None] - theta[:, idx])
+        slots[..., 2] = self._slot_mask * (x_dot[:, :, None] - x_dot[:, idx])
+        return out
+
+    def global_state(self) -> np.ndarray:
+        """``(B, N·6 + 1)`` float32: every vessel's state (ψ wrapped) and the time [s]."""
+        s = self.state.copy()
+        s[..., PSI] = wrap_angle(s[..., PSI])
+        return np.concatenate([s.reshape(self.num_envs, -1), self.time[:, None]], axis=1).astype(np.float32)
+
+    def _min_separation(self, state: np.ndarray) -> np.ndarray:
+        i, j = self._pairs
+        d = np.hypot(state[:, i, X] - state[:, j, X], state[:, i, Y] - state[:, j, Y])
+        return d.min(axis=1)
+
+    def _outputs(self, actions: np.ndarray, u_c: np.ndarray | None) -> StepOutput:
+        cfg, w = self.config, self.config.reward
+        s = self.state
+        theta, x_dot = self._along_track()
+        u_d = cfg.u_d.value(self.time)[:, None]
+        scale = -cfg.dt
+        components = {
+            "cross_track": scale * w.cross_track * _bounded_cost(s[..., Y] - self._dy, w.sigma_cross_track),
+            "heading": scale * w.heading * _bounded_cost(wrap_angle(s[..., PSI]), w.sigma_heading),
+            "coordination": scale
+            * w.coordination
+            * _bounded_cost(theta - theta.mean(axis=1, keepdims=True), w.sigma_coordination),
+            "speed": scale * w.speed * _bounded_cost(x_dot - u_d, w.sigma_speed),
+            "effort": scale * w.effort * np.mean(np.square(actions), axis=-1),
+        }
+        x_lo, x_hi, y_lo, y_hi = cfg.workspace
+        out_of_bounds = np.any(
+            (s[..., X] < x_lo) | (s[..., X] > x_hi) | (s[..., Y] < y_lo) | (s[..., Y] > y_hi), axis=1
+        )
+        collision = self._min_separation(s) < cfg.safety_distance
+        unstable = ~np.all(np.isfinite(s), axis=(1, 2))
+        terminated = out_of_bounds | collision | unstable
+        time_left = np.maximum(cfg.horizon - self.time, 0.0)
+        penalty = -w.total_weight * time_left if w.terminal_penalty else np.zeros_like(time_left)
+        components["terminal"] = np.where(terminated, penalty, 0.0)[:, None] * np.ones((1, self.n))
+        reward = sum(components.values())
+        truncated = (self.steps >= cfg.max_steps) & ~terminated
+        return StepOutput(
+            observation=self.observe(),
+            reward=np.asarray(reward),
+            terminated=terminated,
+            truncated=truncated,
+            components=components,
+            commanded_speed=None if u_c is None else np.array(u_c, copy=True),
+            collision=collision,
+            out_of_bounds=out_of_bounds | unstable,
+        )

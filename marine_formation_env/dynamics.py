@@ -1,0 +1,98 @@
+"""The vessel ODE of SPEC §1 (paper eqs. 1-4), batched, and its RK4 integrator.
+
+State arrays have the columns ``x, y, psi, u, v, r`` in the last axis and any
+number of leading batch axes, typically ``(B, N, 6)`` for B formations of N
+vessels. Units: m, m, rad, m/s, m/s, rad/s. The actuated inputs are the
+accelerations ``τ_u`` [m/s²] and ``τ_r`` [rad/s²] with the leading shape of the
+state (the paper's ``M⁻¹Bu = [τ_u, 0, τ_r]ᵀ``).
+
+This is the only place where the equations of motion are written down; the
+controllers in :mod:`marine_formation_env.control` use :func:`accelerations`
+for their feedback-linearizing terms, so the model and the model-based
+controller cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from marine_formation_env.params import VesselParams
+
+__all__ = ["PSI", "R", "U", "V", "X", "Y", "accelerations", "rk4_step", "vessel_rhs", "wrap_angle"]
+
+#: Column indices of the state vector.
+X, Y, PSI, U, V, R = range(6)
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
+    """Wrap an angle [rad] to ``[−π, π)`` (Fossen's smallest signed angle)."""
+    return np.mod(np.asarray(angle) + np.pi, 2.0 * np.pi) - np.pi
+
+
+def accelerations(
+    p: VesselParams, u: np.ndarray, v: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unforced body accelerations of eq. (4).
+
+    Returns ``(a_u, v_dot, a_r)`` such that ``u̇ = a_u + τ_u``, ``v̇ = v_dot``
+    and ``ṙ = a_r + τ_r`` (SPEC §1)::
+
+        a_u   = [(m22·v + m23·r)·r − d11·u] / m11
+        f2    = −m11·u·r − d22·v − d23·r
+        f3    = (−m22·v − m23·r)·u + m11·u·v − d32·v − d33·r
+        v_dot = (m33·f2 − m23·f3) / Λ
+        a_r   = (m22·f3 − m23·f2) / Λ
+
+    Args:
+        p: vessel parameters.
+        u, v, r: surge [m/s], sway [m/s] and yaw rate [rad/s], same shape.
+    """
+    m22v_m23r = p.m22 * v + p.m23 * r
+    a_u = (m22v_m23r * r - p.d11 * u) / p.m11
+    f2 = -p.m11 * u * r - p.d22 * v - p.d23 * r
+    f3 = -m22v_m23r * u + p.m11 * u * v - p.d32 * v - p.d33 * r
+    inv_lam = 1.0 / p.lam
+    v_dot = (p.m33 * f2 - p.m23 * f3) * inv_lam
+    a_r = (p.m22 * f3 - p.m23 * f2) * inv_lam
+    return a_u, v_dot, a_r
+
+
+def vessel_rhs(p: VesselParams, state: np.ndarray, tau_u: np.ndarray, tau_r: np.ndarray) -> np.ndarray:
+    """Time derivative of ``state`` (shape ``(..., 6)``) under inputs τ_u, τ_r (eqs. 1-4).
+
+    Args:
+        p: vessel parameters.
+        state: ``(..., 6)`` array, columns ``x, y, psi, u, v, r``.
+        tau_u: surge acceleration input [m/s²], shape ``state.shape[:-1]``.
+        tau_r: yaw acceleration input [rad/s²], shape ``state.shape[:-1]``.
+
+    Returns:
+        ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
+    """
+    psi, u, v, r = state[..., PSI], state[..., U], state[..., V], state[..., R]
+    c, s = np.cos(psi), np.sin(psi)
+    a_u, v_dot, a_r = accelerations(p, u, v, r)
+    out = np.empty_like(state)
+    out[..., X] = u * c - v * s
+    out[..., Y] = u * s + v * c
+    out[..., PSI] = r
+    out[..., U] = a_u + tau_u
+    out[..., V] = v_dot
+    out[..., R] = a_r + tau_r
+    return out
+
+
+def rk4_step(rhs: Callable[[np.ndarray], np.ndarray], state: np.ndarray, h: float) -> np.ndarray:
+    """One classical fourth-order Runge-Kutta step of ``ẏ = rhs(y)`` with step ``h`` [s].
+
+    ``rhs`` is autonomous: time-varying inputs must be held over the step or be
+    functions of the state (the closed-loop inner controllers are the latter,
+    which is why they are evaluated at every stage).
+    """
+    k1 = rhs(state)
+    k2 = rhs(state + (0.5 * h) * k1)
+    k3 = rhs(state + (0.5 * h) * k2)
+    k4 = rhs(state + h * k3)
+    return state + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)

@@ -1,0 +1,327 @@
+"""PettingZoo ParallelEnv: a one-formation view of :class:`~marine_formation_env.core.FormationCore`."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.scenarios import ScenarioConfig, make_config
+
+__all__ = ["MarineFormationParallelEnv", "parallel_env"]
+
+RESET_OPTIONS = ("initial_state",)
+
+
+class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
+    """Coordinated path following of underactuated surface vessels under a directed graph.
+
+    ## Description
+
+    ``n`` underactuated 3-DOF surface vessels (surge and yaw actuated, sway
+    not; the supply vessel of Fossen et al. 1996 by default) must follow
+    parallel straight paths ``y = D_yj`` and line up along them in a formation
+    ``x_j − D_xj = x_k − D_xk`` while moving at ``u_d(t)``, as in "Formation
+    Control of Underactuated Marine Vehicles with Communication Constraints".
+    A directed communication graph decides what each vessel knows of the
+    others: vessel ``j`` receives ``(x_i, ẋ_i)`` only from ``i ∈ A_j``. Agents
+    are ``vessel_0 … vessel_{n−1}``; all share one observation and one action
+    space (parameter sharing). The default scenario ``paper`` is the paper's
+    Section V (SPEC §5).
+
+    ## Action Space
+
+    ``Box(-1, 1, (A,), float32)`` per agent, at the chosen ``action_level``.
+    Finite values outside [−1, 1] are clipped; NaN/inf raise. The command is
+    held over the control period ``dt``; the built-in loops run inside the
+    integrator (every RK4 stage of every substep).
+
+    | level      | index | meaning                      | unit   | a = −1        | a = +1       |
+    |------------|-------|------------------------------|--------|---------------|--------------|
+    | `force`    | 0     | surge acceleration τ_u       | m/s²   | −tau_u_max    | +tau_u_max   |
+    | `force`    | 1     | yaw acceleration τ_r         | rad/s² | −tau_r_max    | +tau_r_max   |
+    | `guidance` | 0     | commanded speed u_c          | m/s    | U_min         | U_max        |
+    | `guidance` | 1     | commanded heading ψ_d        | rad    | −psi_max      | +psi_max     |
+    | `speed`    | 0     | commanded speed u_c          | m/s    | U_min         | U_max        |
+
+    Maps are affine: ``u_c = U_min + (a+1)/2·(U_max − U_min)``, ``τ = a·τ_max``,
+    ``ψ_d = a·psi_max``. At `guidance` the surge law (11) and a heading loop
+    (14 with ψ_d in place of ψ_LOS, and 13) track ``(u_c, ψ_d)``; at `speed` the
+    paper's LOS path follower (11)-(14) steers and tracks ``u_c``, so the policy
+    does the coordination (20). Defaults: tau_u_max = 3 m/s², tau_r_max =
+    2 rad/s² (the paper's gains need up to 2.43 m/s² and 1.82 rad/s² in the
+    `paper` scenario), psi_max = π/2.
+
+    ## Observation Space
+
+    ``Box(-inf, inf, (7 + 4·(n−1),), float32)`` per agent; own quantities
+    first, then one 4-entry slot per other vessel ``i = (j + k + 1) mod n``,
+    ``k = 0 … n−2``. Slot entries are zero when ``i ∉ A_j``.
+
+    | index     | observation                              | unit   | min  | max |
+    |-----------|------------------------------------------|--------|------|-----|
+    | 0         | cross-track error e_j = y_j − D_yj       | m      | -inf | inf |
+    | 1         | heading ψ_j, wrapped                     | rad    | -π   | π   |
+    | 2         | surge speed u_j                          | m/s    | -inf | inf |
+    | 3         | sway speed v_j                           | m/s    | -inf | inf |
+    | 4         | yaw rate r_j                             | rad/s  | -inf | inf |
+    | 5         | desired formation speed u_d(t)           | m/s    | -inf | inf |
+    | 6         | its rate u̇_d(t)                          | m/s²   | -inf | inf |
+    | 7 + 4k    | link bit: 1 iff i transmits to j         | –      | 0    | 1   |
+    | 8 + 4k    | (x_j − D_xj) − (x_i − D_xi)              | m      | -inf | inf |
+    | 9 + 4k    | ẋ_j − ẋ_i                                | m/s    | -inf | inf |
+    | 10 + 4k   | age of the received data (0: ideal link) | s      | 0    | inf |
+
+    Nothing else of another vessel reaches ``j``: what ``i`` transmits is
+    ``(x_i, ẋ_i)`` (SPEC §3), given relative to ``j``. ``state()`` returns the
+    global state ``(n·6 + 1,)``: every vessel's ``x, y, ψ (wrapped), u, v, r``
+    followed by the time [s], for centralized critics.
+
+    ## Rewards
+
+    Per vessel and step, with ``c(e; σ) = (e/σ)²/(1 + (e/σ)²) ∈ [0, 1)`` and
+    ``θ_j = x_j − D_xj``::
+
+        r_j = −dt·[ 1.0·c(e_j; 20 m) + 0.25·c(ψ_j; 0.2 rad)
+                    + 1.0·c(θ_j − mean_k θ_k; 20 m) + 0.5·c(ẋ_j − u_d; 1 m/s)
+                    + 0.0·mean(a²) ]
+
+    Weights and scales are ``reward=RewardConfig(...)`` fields. If the
+    formation terminates early, every vessel also receives
+    ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
+    so ending an episode never pays. ``infos[agent]["reward_components"]``
+    holds every term (``cross_track, heading, coordination, speed, effort,
+    terminal``); they sum to the reward. A return near 0 is perfect.
+
+    ## Starting State
+
+    The scenario's nominal state plus uniform noise of half-widths
+    ``init_noise`` (x, y [m], ψ [rad], u [m/s]); ``paper``: exactly SPEC §5,
+    ``(x, y, ψ, u, v, r)`` = (−50, 20, 0, 3, 0, 0), (−60, 30, 0.3, 3, 0, 0),
+    (−120, −10, −0.2, 3, 0, 0). ``reset(options={"initial_state": (n, 6)})``
+    sets it exactly.
+
+    ## Episode End
+
+    * Termination (all agents at once): two vessels closer than
+      ``safety_distance`` (default 5 m; 0, i.e. off, in `paper`, whose initial
+      state makes vessel_0 and vessel_1 cross paths 0.5 m apart under the
+      paper's controller, which does not consider collisions), a vessel
+      outside ``workspace`` (default: a box holding the whole nominal run with
+      500 m / 250 m margins), or a non-finite state.
+    * Truncation: after ``round(horizon/dt)`` steps (400 s: 800 steps at the
+      default dt of `speed`/`guidance`, 4000 at `force`).
+
+    ## Arguments
+
+    ``marine_formation_env.parallel_env(scenario="paper", render_mode=None, **overrides)``
+
+    | argument           | default              | meaning                                                    |
+    |--------------------|----------------------|------------------------------------------------------------|
+    | `scenario`         | `"paper"`            | named defaults (`marine_formation_env.SCENARIOS`)          |
+    | `render_mode`      | None                 | `"rgb_array"` or `"human"`                                 |
+    | `action_level`     | `"speed"`            | `force`, `guidance` or `speed`                             |
+    | `dt`               | 0.1 / 0.5 / 0.5 s    | control period (force / guidance / speed)                  |
+    | `substeps`         | ceil(dt / 0.1 s)     | RK4 steps per control period                               |
+    | `horizon`          | 400 s                | episode length                                             |
+    | `n_vessels`        | 3                    | changing it switches to a generated `v` formation          |
+    | `topology`         | `"paper"`            | preset name, `CommGraph` or (n, n) adjacency               |
+    | `formation`        | `"paper"`            | pattern name or (n, 2) offsets (D_x, D_y) [m]              |
+    | `u_d`              | 5 m/s                | number or `SpeedProfile` (must satisfy (19))               |
+    | `u_min`, `u_max`   | 3, 7 m/s             | controllability band                                       |
+    | `gains`            | paper's              | `Gains(k_u, k_psi, k_r, delta, a)`                         |
+    | `paper_as_printed` | False                | run (11) and (14) as printed (SPEC §3)                     |
+    | `safety_distance`  | 5 m (`paper`: 0)     | collision distance (0 disables the check)                  |
+
+    All fields of :class:`~marine_formation_env.scenarios.ScenarioConfig`
+    are accepted; an unknown key raises.
+
+    ## Version History
+
+    * v0: initial release.
+    """
+
+    metadata = {"name": "marine_formation_v0", "render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.render_mode = render_mode
+        self.core = FormationCore(self.config, num_envs=1)
+        n = self.config.n_vessels
+        self.possible_agents = [f"vessel_{j}" for j in range(n)]
+        self.agents: list[str] = []
+        self._index = {agent: j for j, agent in enumerate(self.possible_agents)}
+        dim = self.core.layout.dim
+        low = np.full(dim, -np.inf, dtype=np.float32)
+        high = np.full(dim, np.inf, dtype=np.float32)
+        low[1], high[1] = -math.pi, math.pi
+        own, slot = self.core.layout.own, self.core.layout.slot
+        low[own::slot], high[own::slot] = 0.0, 1.0
+        low[own + 3 :: slot] = 0.0
+        self._observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._action_space = spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
+        self.state_space = spaces.Box(-np.inf, np.inf, (n * 6 + 1,), dtype=np.float32)
+        self.np_random, self.np_random_seed = seeding.np_random(None)
+        self._last: StepOutput | None = None
+        self._renderer: Any = None
+        self._started = False
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent: str) -> spaces.Box:
+        """The shared observation space (the same object for every agent)."""
+        self._check_agent(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Box:
+        """The shared action space (the same object for every agent)."""
+        self._check_agent(agent)
+        return self._action_space
+
+    def _check_agent(self, agent: str) -> None:
+        if agent not in self._index:
+            raise KeyError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
+
+    # ------------------------------------------------------------------- API
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
+        """Start an episode.
+
+        Args:
+            seed: seeds the env's generator (initial-state noise).
+            options: ``{"initial_state": (n, 6) array}`` sets the state exactly
+                (columns x, y, psi, u, v, r); other keys are ignored with a warning.
+        """
+        if seed is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(seed)
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            warnings.warn(f"reset ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}", stacklevel=2)
+        initial = options.get("initial_state")
+        if initial is None:
+            initial = self.core.sample_initial_state(self.np_random)
+        obs = self.core.reset(initial)[0]
+        self.agents = list(self.possible_agents)
+        self._last = None
+        self._started = True
+        if self.render_mode == "human":
+            self.render()
+        return self._per_agent(obs), {agent: {} for agent in self.agents}
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[
+        dict[str, np.ndarray],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict[str, Any]],
+    ]:
+        """Apply one action per live agent and advance one control period ``dt``.
+
+        Raises:
+            RuntimeError: before ``reset`` or after the episode ended.
+            KeyError: a live agent's action is missing, or an unknown key is given.
+            ValueError: an action of the wrong shape or with NaN/inf.
+        """
+        if not self._started:
+            raise RuntimeError("step() called before reset()")
+        if not self.agents:
+            raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
+        batch = self._action_batch(actions)
+        out = self.core.step(batch)
+        self._last = out
+        obs = self._per_agent(out.observation[0])
+        rewards = {agent: float(out.reward[0, self._index[agent]]) for agent in self.agents}
+        term, trunc = bool(out.terminated[0]), bool(out.truncated[0])
+        terminations = dict.fromkeys(self.agents, term)
+        truncations = dict.fromkeys(self.agents, trunc)
+        infos = {agent: self._info(out, self._index[agent]) for agent in self.agents}
+        if term or trunc:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
+
+    def state(self) -> np.ndarray:
+        """Global state ``(n·6 + 1,)`` float32: all vessels' ``x, y, ψ, u, v, r`` and the time [s]."""
+        return self.core.global_state()[0]
+
+    # ------------------------------------------------------------- rendering
+    def render(self) -> np.ndarray | None:
+        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
+        if self.render_mode is None:
+            warnings.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'", stacklevel=2)
+            return None
+        if self._renderer is None:
+            from marine_formation_env.render import FormationRenderer
+
+            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
+        return self._renderer.draw(self.core.state[0], float(self.core.time[0]))
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # --------------------------------------------------------------- helpers
+    @property
+    def time(self) -> float:
+        """Simulated time since reset [s]."""
+        return float(self.core.time[0])
+
+    @property
+    def vessel_states(self) -> np.ndarray:
+        """``(n, 6)`` float64 copy of the physical state (columns x, y, psi, u, v, r)."""
+        return self.core.state[0].copy()
+
+    def _per_agent(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        return {agent: obs[self._index[agent]] for agent in self.possible_agents if agent in self.agents}
+
+    def _action_batch(self, actions: dict[str, Any]) -> np.ndarray:
+        if not isinstance(actions, dict):
+            raise TypeError(f"actions must be a dict {{agent: action}}, got {type(actions).__name__}")
+        unknown = sorted(set(actions) - set(self.agents))
+        if unknown:
+            raise KeyError(f"actions for unknown or finished agent(s) {unknown}; live agents are {self.agents}")
+        missing = [agent for agent in self.agents if agent not in actions]
+        if missing:
+            raise KeyError(f"missing actions for agent(s) {missing}; every live agent must act")
+        dim = self.config.action_dim
+        batch = np.empty((1, self.config.n_vessels, dim))
+        for agent, action in actions.items():
+            try:
+                arr = np.asarray(action, dtype=float).reshape(-1)
+            except (TypeError, ValueError):
+                raise ValueError(f"action of {agent} must be numeric, got {action!r}") from None
+            if arr.shape != (dim,):
+                raise ValueError(f"action of {agent} must have shape ({dim},), got {np.shape(action)}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"action of {agent} must be finite, got {arr.tolist()}")
+            batch[0, self._index[agent]] = arr
+        return batch
+
+    def _info(self, out: StepOutput, j: int) -> dict[str, Any]:
+        info: dict[str, Any] = {
+            "reward_components": {key: float(value[0, j]) for key, value in out.components.items()},
+            "time": float(self.core.time[0]),
+            "collision": bool(out.collision[0]),
+            "out_of_bounds": bool(out.out_of_bounds[0]),
+        }
+        if out.commanded_speed is not None:
+            info["commanded_speed"] = float(out.commanded_speed[0, j])
+        return info
+
+
+def parallel_env(scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> MarineFormationParallelEnv:
+    """Create the PettingZoo ParallelEnv (see :class:`MarineFormationParallelEnv`)."""
+    return MarineFormationParallelEnv(scenario=scenario, render_mode=render_mode, **overrides)

@@ -1,0 +1,183 @@
+"""Rendering with matplotlib (imported lazily; ``pip install marine-formation-env[render]``).
+
+A fixed world camera shows the scenario's workspace box with:
+
+* the desired paths ``y = D_yj`` (dashed),
+* the formation slots ``(x̄ + D_xj, D_yj)`` around the current mean along-track
+  position ``x̄ = mean_k(x_k − D_xk)`` (hollow circles),
+* each vessel as an oriented hull polygon at true scale,
+* every communication link as an arrow from transmitter to receiver.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = ["VESSEL_COLORS", "FormationRenderer", "hull_polygon", "require_matplotlib"]
+
+VESSEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+
+
+def require_matplotlib() -> Any:
+    """Import matplotlib or fail with the install hint."""
+    try:
+        import matplotlib
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "rendering and plotting need matplotlib: pip install 'marine-formation-env[render]'"
+        ) from err
+    return matplotlib
+
+
+def hull_polygon(x: float, y: float, psi: float, length: float, beam: float) -> np.ndarray:
+    """Corners ``(7, 2)`` [m] of a hull outline with a pointed bow, centred at (x, y), heading ψ."""
+    half_l, half_b = 0.5 * length, 0.5 * beam
+    body = np.array(
+        [
+            [half_l, 0.0],
+            [0.55 * half_l, half_b],
+            [-half_l, half_b],
+            [-half_l, -half_b],
+            [0.55 * half_l, -half_b],
+            [half_l, 0.0],
+        ]
+    )
+    c, s = np.cos(psi), np.sin(psi)
+    return body @ np.array([[c, s], [-s, c]]) + np.array([x, y])
+
+
+def vessel_color(j: int) -> str:
+    """A stable color per vessel index."""
+    return VESSEL_COLORS[j % len(VESSEL_COLORS)]
+
+
+class FormationRenderer:
+    """Draws frames of one formation; ``draw`` returns an RGB array (or updates a window).
+
+    Top panel: the fixed world camera over the workspace, with the paths
+    travelled so far. Bottom panel: a close-up that follows the formation's
+    centroid (``zoom_width`` metres wide) so hulls, slots and link arrows stay
+    legible when the workspace is kilometres long.
+    """
+
+    def __init__(self, config: ScenarioConfig, human: bool = False, width_px: int = 1280, zoom_width: float = 500.0) -> None:
+        require_matplotlib()
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        self.config = config
+        self.human = human
+        self.zoom_width = float(zoom_width)
+        self._trail: list[np.ndarray] = []
+        x_lo, x_hi, y_lo, y_hi = config.workspace
+        width_in = width_px / 100.0
+        world_h = float(np.clip(width_in * (y_hi - y_lo) / (x_hi - x_lo), 1.6, 0.5 * width_in))
+        zoom_h = 0.3 * width_in
+        height_in = world_h + zoom_h + 1.2
+        self._plt: Any = None
+        if human:
+            import matplotlib.pyplot as plt
+
+            plt.ion()
+            self._plt = plt
+            self.fig = plt.figure(figsize=(width_in, height_in))
+        else:
+            self.fig = Figure(figsize=(width_in, height_in), dpi=100)
+            FigureCanvasAgg(self.fig)
+        grid = self.fig.add_gridspec(2, 1, height_ratios=[world_h, zoom_h])
+        self.ax_world = self.fig.add_subplot(grid[0])
+        self.ax_zoom = self.fig.add_subplot(grid[1])
+
+    def draw(self, state: np.ndarray, time: float) -> np.ndarray | None:
+        """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human."""
+        cfg = self.config
+        if time == 0.0 or not self._trail:
+            self._trail = []
+        self._trail.append(np.array(state[:, :2]))
+        trail = np.stack(self._trail)  # (T, n, 2)
+        x_lo, x_hi, y_lo, y_hi = cfg.workspace
+        offsets = cfg.formation
+        spread = float(np.ptp(state[:, 0] - offsets[:, 0]))
+        cross = float(np.max(np.abs(state[:, 1] - offsets[:, 1])))
+
+        ax = self.ax_world
+        ax.clear()
+        self._draw_scene(ax, state, link_arrows=False)
+        for j in range(cfg.n_vessels):
+            ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8)
+        ax.set_xlim(x_lo, x_hi)
+        ax.set_ylim(y_lo, y_hi)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_ylabel("y [m]")
+        ax.set_title(
+            f"{cfg.name} ({cfg.action_level})   t = {time:6.1f} s   coordination spread {spread:8.2f} m   "
+            f"max |y − D_y| {cross:7.2f} m",
+            fontsize=9,
+        )
+
+        ax = self.ax_zoom
+        ax.clear()
+        self._draw_scene(ax, state, link_arrows=True)
+        for j in range(cfg.n_vessels):
+            ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8, alpha=0.6)
+        cx, cy = float(np.mean(state[:, 0])), float(np.mean(offsets[:, 1]))
+        ratio = 0.3  # height / width of the close-up window
+        half_w = max(
+            0.5 * self.zoom_width,
+            0.6 * float(np.ptp(state[:, 0])) + 50.0,
+            (0.6 * float(np.ptp(np.append(state[:, 1], offsets[:, 1]))) + 40.0) / ratio,
+        )
+        ax.set_xlim(cx - half_w, cx + half_w)
+        ax.set_ylim(cy - ratio * half_w, cy + ratio * half_w)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_title("close-up: hulls to scale, formation slots (circles), links i → j (arrows)", fontsize=8)
+        self.fig.tight_layout()
+        if self.human:
+            self.fig.canvas.draw_idle()
+            self._plt.pause(1.0 / 30.0)
+            return None
+        self.fig.canvas.draw()
+        rgba = np.asarray(self.fig.canvas.buffer_rgba())
+        return np.array(rgba[..., :3])
+
+    def _draw_scene(self, ax: Any, state: np.ndarray, link_arrows: bool) -> None:
+        from matplotlib.patches import Circle, FancyArrowPatch, Polygon
+
+        cfg = self.config
+        offsets = cfg.formation
+        length = cfg.params.length or 40.0
+        beam = cfg.params.beam or 0.25 * length
+        for j, (_, d_y) in enumerate(offsets):
+            ax.axhline(d_y, color=vessel_color(j), lw=0.8, ls="--", alpha=0.5)
+        x_bar = float(np.mean(state[:, 0] - offsets[:, 0]))
+        for j, (d_x, d_y) in enumerate(offsets):
+            ax.add_patch(Circle((x_bar + d_x, d_y), 0.4 * length, fill=False, ec=vessel_color(j), lw=1.0))
+        if link_arrows:
+            for i, j in cfg.graph.links:  # i transmits to j
+                ax.add_patch(
+                    FancyArrowPatch(
+                        (float(state[i, 0]), float(state[i, 1])),
+                        (float(state[j, 0]), float(state[j, 1])),
+                        arrowstyle="-|>",
+                        mutation_scale=12,
+                        color="0.3",
+                        lw=1.0,
+                        shrinkA=10,
+                        shrinkB=10,
+                        connectionstyle="arc3,rad=0.15",
+                    )
+                )
+        for j, (x, y, psi, *_rest) in enumerate(state):
+            ax.add_patch(Polygon(hull_polygon(x, y, psi, length, beam), closed=True, fc=vessel_color(j), ec="k", lw=0.6))
+            if link_arrows:
+                ax.annotate(f"vessel_{j}", (x, y), xytext=(0, 9), textcoords="offset points", ha="center", fontsize=8)
+
+    def close(self) -> None:
+        if self._plt is not None:
+            self._plt.close(self.fig)
