@@ -45,7 +45,9 @@ class ReferencePolicy:
     def __init__(self, env: Any) -> None:
         config = env if isinstance(env, ScenarioConfig) else getattr(getattr(env, "unwrapped", env), "config", None)
         if not isinstance(config, ScenarioConfig):
-            raise TypeError(f"ReferencePolicy needs a marine_formation_env env or ScenarioConfig, got {type(env).__name__}")
+            raise TypeError(
+                f"ReferencePolicy needs a marine_formation_env env or ScenarioConfig, got {type(env).__name__}"
+            )
         self.config = config
         self.layout = ObservationLayout(config.n_vessels)
         # Used only for its action maps (no state is read from it).

@@ -171,7 +171,9 @@ class FormationCore:
         target_shape = self.state[ids].shape
         arr = np.asarray(initial_state, dtype=float)
         if arr.shape != (self.n, 6) and arr.shape != target_shape:
-            raise ValueError(f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}")
+            raise ValueError(
+                f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}"
+            )
         if not np.all(np.isfinite(arr)):
             bad = tuple(np.argwhere(~np.isfinite(arr))[0])
             raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
@@ -222,7 +224,9 @@ class FormationCore:
         actions = np.asarray(actions, dtype=float)
         expected = (self.num_envs, self.n, self.action_dim)
         if actions.shape != expected:
-            raise ValueError(f"actions must have shape {expected} (formations, vessels, action dim), got {actions.shape}")
+            raise ValueError(
+                f"actions must have shape {expected} (formations, vessels, action dim), got {actions.shape}"
+            )
         if not np.all(np.isfinite(actions)):
             bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
@@ -281,7 +285,7 @@ class FormationCore:
         out = np.zeros((b, n, self.layout.dim), dtype=np.float32)
         out[..., 0] = s[..., Y] - self._dy
         out[..., 1] = wrap_angle(s[..., PSI])
-        out[..., 2:5] = s[..., U:R + 1]
+        out[..., 2:5] = s[..., U : R + 1]
         out[..., 5] = cfg.u_d.value(self.time)[:, None]
         out[..., 6] = cfg.u_d.rate(self.time)[:, None]
         theta, x_dot = self._along_track()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from gymnasium import spaces
@@ -147,7 +147,11 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     * v0: initial release.
     """
 
-    metadata = {"name": "marine_formation_v0", "render_modes": ["human", "rgb_array"], "render_fps": 10}
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "marine_formation_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+    }
 
     def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -260,7 +264,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     def render(self) -> np.ndarray | None:
         """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
         if self.render_mode is None:
-            warnings.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'", stacklevel=2)
+            warnings.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'", stacklevel=2
+            )
             return None
         if self._renderer is None:
             from marine_formation_env.render import FormationRenderer
@@ -322,6 +328,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         return info
 
 
-def parallel_env(scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> MarineFormationParallelEnv:
+def parallel_env(
+    scenario: str = "paper", render_mode: str | None = None, **overrides: Any
+) -> MarineFormationParallelEnv:
     """Create the PettingZoo ParallelEnv (see :class:`MarineFormationParallelEnv`)."""
     return MarineFormationParallelEnv(scenario=scenario, render_mode=render_mode, **overrides)

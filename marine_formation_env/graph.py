@@ -129,7 +129,7 @@ class CommGraph:
     @property
     def edges(self) -> list[tuple[int, int]]:
         """Edges ``(j, i)`` in the paper's convention, sorted."""
-        return [(int(j), int(i)) for j, i in zip(*np.nonzero(self.adjacency))]
+        return [(int(j), int(i)) for j, i in zip(*np.nonzero(self.adjacency), strict=True)]
 
     @property
     def links(self) -> list[tuple[int, int]]:

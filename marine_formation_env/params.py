@@ -72,17 +72,14 @@ class VesselParams:
         for key in ("m11", "m22", "m33", "d11"):
             value = getattr(self, key)
             if not (math.isfinite(value) and value > 0.0):
-                raise ParameterError(
-                    f"vessel {self.name!r}: {key} must be finite and > 0, got {value!r}"
-                )
+                raise ParameterError(f"vessel {self.name!r}: {key} must be finite and > 0, got {value!r}")
         for key in ("m23", "d22", "d23", "d32", "d33"):
             value = getattr(self, key)
             if not math.isfinite(value):
                 raise ParameterError(f"vessel {self.name!r}: {key} must be finite, got {value!r}")
         if self.lam <= 0.0:
             raise ParameterError(
-                f"vessel {self.name!r}: M must be positive definite, but "
-                f"Λ = m22·m33 − m23² = {self.lam:.6g} ≤ 0"
+                f"vessel {self.name!r}: M must be positive definite, but Λ = m22·m33 − m23² = {self.lam:.6g} ≤ 0"
             )
 
     # ------------------------------------------------------------------ derived
@@ -137,9 +134,7 @@ class VesselParams:
 
     def as_array(self) -> np.ndarray:
         """The nine model coefficients ``[m11, m22, m23, m33, d11, d22, d23, d32, d33]``."""
-        return np.array(
-            [self.m11, self.m22, self.m23, self.m33, self.d11, self.d22, self.d23, self.d32, self.d33]
-        )
+        return np.array([self.m11, self.m22, self.m23, self.m33, self.d11, self.d22, self.d23, self.d32, self.d33])
 
     # -------------------------------------------------------------- constructors
     @classmethod

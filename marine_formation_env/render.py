@@ -27,9 +27,7 @@ def require_matplotlib() -> Any:
     try:
         import matplotlib
     except ImportError as err:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            "rendering and plotting need matplotlib: pip install 'marine-formation-env[render]'"
-        ) from err
+        raise ImportError("rendering and plotting need matplotlib: pip install 'marine-formation-env[render]'") from err
     return matplotlib
 
 
@@ -64,7 +62,9 @@ class FormationRenderer:
     legible when the workspace is kilometres long.
     """
 
-    def __init__(self, config: ScenarioConfig, human: bool = False, width_px: int = 1280, zoom_width: float = 500.0) -> None:
+    def __init__(
+        self, config: ScenarioConfig, human: bool = False, width_px: int = 1280, zoom_width: float = 500.0
+    ) -> None:
         require_matplotlib()
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -143,7 +143,7 @@ class FormationRenderer:
             self._plt.pause(1.0 / 30.0)
             return None
         self.fig.canvas.draw()
-        rgba = np.asarray(self.fig.canvas.buffer_rgba())
+        rgba = np.asarray(self.fig.canvas.buffer_rgba())  # type: ignore[attr-defined]
         return np.array(rgba[..., :3])
 
     def _draw_scene(self, ax: Any, state: np.ndarray, link_arrows: bool) -> None:
@@ -174,7 +174,9 @@ class FormationRenderer:
                     )
                 )
         for j, (x, y, psi, *_rest) in enumerate(state):
-            ax.add_patch(Polygon(hull_polygon(x, y, psi, length, beam), closed=True, fc=vessel_color(j), ec="k", lw=0.6))
+            ax.add_patch(
+                Polygon(hull_polygon(x, y, psi, length, beam), closed=True, fc=vessel_color(j), ec="k", lw=0.6)
+            )
             if link_arrows:
                 ax.annotate(f"vessel_{j}", (x, y), xytext=(0, 9), textcoords="offset points", ha="center", fontsize=8)
 

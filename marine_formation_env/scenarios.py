@@ -143,7 +143,11 @@ class InitNoise:
     def __post_init__(self) -> None:
         for key in ("x", "y", "psi", "u"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value >= 0)
+            ):
                 raise ConfigError(f"init_noise.{key} must be a finite number ≥ 0, got {value!r}")
 
     def as_array(self) -> np.ndarray:
@@ -182,7 +186,11 @@ class RewardConfig:
             if f.name == "terminal_penalty":
                 continue
             value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value >= 0):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (math.isfinite(value) and value >= 0)
+            ):
                 raise ConfigError(f"reward.{f.name} must be a finite number ≥ 0, got {value!r}")
             if f.name.startswith("sigma_") and value == 0:
                 raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
@@ -240,8 +248,8 @@ class ScenarioConfig:
     u_min: float = 3.0
     u_max: float = 7.0
     action_level: str = "speed"
-    dt: float | None = None
-    substeps: int | None = None
+    dt: Any = None  # resolved to float: the level's default when None
+    substeps: Any = None  # resolved to int: ceil(dt / 0.1 s) when None
     horizon: float = 400.0
     paper_as_printed: bool = False
     initial_state: Any = None
@@ -379,7 +387,8 @@ class ScenarioConfig:
             y_ext = float(max(np.max(np.abs(nominal[:, 1])) + spread[1], np.max(np.abs(offsets[:, 1])))) + 250.0
             box = (x_lo, x_hi, -y_ext, y_ext)
         else:
-            box = tuple(float(v) for v in _float_array(self.workspace, "workspace", (4,)))
+            x0, x1, y0, y1 = (float(v) for v in _float_array(self.workspace, "workspace", (4,)))
+            box = (x0, x1, y0, y1)
             if not (box[0] < box[1] and box[2] < box[3]):
                 raise ConfigError(f"workspace (x_min, x_max, y_min, y_max) must have min < max, got {box}")
         set_("workspace", box)
@@ -398,7 +407,7 @@ class ScenarioConfig:
     @property
     def max_steps(self) -> int:
         """Control periods per episode (truncation)."""
-        return max(1, int(round(self.horizon / self.dt)))
+        return max(1, round(self.horizon / self.dt))
 
     @property
     def action_dim(self) -> int:
@@ -502,4 +511,3 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
                 base["init_noise"] = GENERATED_INIT_NOISE
     base.update(overrides)
     return ScenarioConfig(**base)
-

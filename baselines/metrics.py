@@ -1,0 +1,104 @@
+"""Episode metrics of the paper's control goals (7)-(10), computed from a :class:`Trajectory`.
+
+Definitions (n vessels, θ_j = x_j − D_xj):
+
+* cross-track error e_j = y_j − D_yj (goal 7); heading ψ_j (goal 8, wrapped);
+* coordination spread max_j θ_j − min_j θ_j (goal 9a);
+* speed error u_j − u_d(t) (goals 9b, 10);
+* settling time: the earliest time after which, until the end of the episode,
+  max |e_j| ≤ 0.5 m, max |ψ_j| ≤ 0.5°, the spread ≤ 0.5 m and
+  max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
+* time outside the band: control periods with some u_cj ∉ (U_min, U_max), in s;
+* effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
+* return: per-vessel sum of rewards, averaged over vessels.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from baselines.rollout import Trajectory
+from marine_formation_env.dynamics import wrap_angle
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = ["SETTLING_BANDS", "episode_metrics", "settling_time", "summarize"]
+
+#: Tolerances that define "settled": cross-track [m], heading [deg], spread [m], speed [m/s].
+SETTLING_BANDS = {"cross_track": 0.5, "heading_deg": 0.5, "spread": 0.5, "speed": 0.05}
+
+
+def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
+    s = traj.state
+    theta = s[..., 0] - cfg.formation[:, 0]
+    return {
+        "cross_track": s[..., 1] - cfg.formation[:, 1],
+        "heading_deg": np.degrees(wrap_angle(s[..., 2])),
+        "spread": np.ptp(theta, axis=1),
+        "speed": s[..., 3] - traj.u_d[:, None],
+    }
+
+
+def settling_time(traj: Trajectory, cfg: ScenarioConfig, bands: dict[str, float] = SETTLING_BANDS) -> float | None:
+    """Earliest time after which every error stays inside ``bands`` (see module docstring)."""
+    err = _errors(traj, cfg)
+    inside = np.ones(len(traj.t), dtype=bool)
+    for key, tol in bands.items():
+        value = np.abs(err[key])
+        inside &= (value if value.ndim == 1 else value.max(axis=1)) <= tol
+    if not inside[-1]:
+        return None
+    outside = np.flatnonzero(~inside)
+    return float(traj.t[0] if outside.size == 0 else traj.t[outside[-1] + 1])
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
+    """All metrics of one episode as a JSON-friendly dict (units in the key names' docs)."""
+    err = _errors(traj, cfg)
+    u_c = traj.commanded_speed
+    known = np.all(np.isfinite(u_c), axis=1) if u_c.size else np.zeros(0, dtype=bool)
+    outside = ~np.all((u_c > cfg.u_min) & (u_c < cfg.u_max), axis=1) & known
+    returns = traj.rewards.sum(axis=0)
+    i, j = np.triu_indices(cfg.n_vessels, k=1)
+    separation = np.hypot(traj.state[:, i, 0] - traj.state[:, j, 0], traj.state[:, i, 1] - traj.state[:, j, 1])
+    settle = settling_time(traj, cfg)
+    return {
+        "episode_time": float(traj.t[-1]),
+        "steps": len(traj.t) - 1,
+        "return": float(returns.mean()),
+        "return_per_vessel": returns.tolist(),
+        "final_cross_track_max": float(np.abs(err["cross_track"][-1]).max()),
+        "rms_cross_track": _rms(err["cross_track"]),
+        "final_heading_max_deg": float(np.abs(err["heading_deg"][-1]).max()),
+        "rms_heading_deg": _rms(err["heading_deg"]),
+        "final_coordination_spread": float(err["spread"][-1]),
+        "rms_coordination_spread": _rms(err["spread"]),
+        "final_speed_error_max": float(np.abs(err["speed"][-1]).max()),
+        "rms_speed_error": _rms(err["speed"]),
+        "settling_time": settle,
+        "commanded_speed_min": float(np.nanmin(u_c)) if known.any() else None,
+        "commanded_speed_max": float(np.nanmax(u_c)) if known.any() else None,
+        "time_outside_speed_band": float(outside.sum() * cfg.dt),
+        "effort": float(np.mean(np.square(traj.actions))) if traj.actions.size else 0.0,
+        "min_separation": float(separation.min()),
+        "terminated": traj.terminated,
+        "collision": traj.collision,
+    }
+
+
+def summarize(episodes: list[dict[str, Any]]) -> dict[str, dict[str, float | None]]:
+    """Mean and std over episodes of every numeric metric (None-valued entries skipped)."""
+    out: dict[str, dict[str, float | None]] = {}
+    for key in episodes[0]:
+        values = [e[key] for e in episodes if isinstance(e[key], (int, float)) and not isinstance(e[key], bool)]
+        flags = [e[key] for e in episodes if isinstance(e[key], bool)]
+        if flags:
+            out[key] = {"mean": float(np.mean(flags)), "std": float(np.std(flags)), "count": len(flags)}
+        elif values:
+            out[key] = {"mean": float(np.mean(values)), "std": float(np.std(values)), "count": len(values)}
+    return out

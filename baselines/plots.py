@@ -1,0 +1,133 @@
+"""Figures in the style of the paper's Fig. 6 (matplotlib, imported lazily).
+
+:func:`plot_episode` draws, for one recorded episode:
+
+(a) the paths in the plane with the desired paths and the vessels drawn as
+    oriented markers at a few instants, (b) cross-track errors y_j − D_yj,
+(c) headings ψ_j, (d) along-track coordination errors
+    x_j − D_xj − (x_k − D_xk) for every pair (or relative to the mean when
+    n > 4), (e) surge speeds u_j and commanded speeds u_cj with u_d(t) and the
+    band (U_min, U_max).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines.rollout import Trajectory
+from marine_formation_env.dynamics import wrap_angle
+from marine_formation_env.render import require_matplotlib, vessel_color
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = ["plot_episode"]
+
+
+def _snapshot_indices(t: np.ndarray, count: int = 6) -> np.ndarray:
+    marks = np.array([0.0, 20.0, 50.0, 100.0, 200.0, t[-1]])[:count]
+    marks = marks[marks <= t[-1]]
+    return np.unique(np.searchsorted(t, marks).clip(0, len(t) - 1))
+
+
+def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None = None, title: str = "") -> Any:
+    """Draw the Fig. 6 panels for ``traj`` and save to ``path`` (PNG/PDF/SVG) if given.
+
+    Returns:
+        The matplotlib Figure.
+    """
+    require_matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    t, s = traj.t, traj.state
+    n = cfg.n_vessels
+    offsets = cfg.formation
+    fig = Figure(figsize=(12.0, 11.0), dpi=110)
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(3, 2, height_ratios=[1.1, 1.0, 1.0])
+    ax_path = fig.add_subplot(grid[0, :])
+    ax_ct = fig.add_subplot(grid[1, 0])
+    ax_psi = fig.add_subplot(grid[1, 1], sharex=ax_ct)
+    ax_coord = fig.add_subplot(grid[2, 0], sharex=ax_ct)
+    ax_u = fig.add_subplot(grid[2, 1], sharex=ax_ct)
+
+    # (a) paths in the plane
+    for j in range(n):
+        color = vessel_color(j)
+        ax_path.axhline(offsets[j, 1], color=color, ls="--", lw=0.8, alpha=0.6)
+        ax_path.plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.2, label=f"vessel_{j}")
+        for k in _snapshot_indices(t):
+            ax_path.plot(
+                s[k, j, 0],
+                s[k, j, 1],
+                ls="none",
+                color=color,
+                mec="k",
+                mew=0.5,
+                ms=9,
+                marker=(3, 0, np.degrees(s[k, j, 2]) - 90.0),
+            )
+    for k in _snapshot_indices(t):
+        ax_path.annotate(
+            f"{t[k]:.0f} s",
+            (float(np.mean(s[k, :, 0])), float(np.max(s[k, :, 1]))),
+            xytext=(0, 10),
+            textcoords="offset points",
+            ha="center",
+            fontsize=7,
+            color="0.3",
+        )
+    ax_path.set_xlabel("x [m]")
+    ax_path.set_ylabel("y [m]")
+    ax_path.set_title("(a) paths; markers show the vessels (pointing along ψ) at the labelled times", fontsize=9)
+    ax_path.legend(loc="center right", bbox_to_anchor=(1.0, 0.72), fontsize=8, ncol=min(n, 4))
+
+    # (b) cross-track errors, (c) heading
+    for j in range(n):
+        ax_ct.plot(t, s[:, j, 1] - offsets[j, 1], color=vessel_color(j), lw=1.2)
+        ax_psi.plot(t, np.degrees(wrap_angle(s[:, j, 2])), color=vessel_color(j), lw=1.2)
+    ax_ct.set_ylabel("y_j − D_yj [m]")
+    ax_ct.set_title("(b) cross-track errors", fontsize=9)
+    ax_psi.set_ylabel("ψ_j [deg]")
+    ax_psi.set_title("(c) headings", fontsize=9)
+
+    # (d) coordination errors
+    theta = s[..., 0] - offsets[:, 0]
+    if n <= 4:
+        for j in range(n):
+            for k in range(j + 1, n):
+                ax_coord.plot(t, theta[:, j] - theta[:, k], lw=1.2, label=f"{j}−{k}")
+        ax_coord.set_ylabel("(x_j − D_xj) − (x_k − D_xk) [m]")
+        ax_coord.legend(fontsize=7, title="j−k", title_fontsize=7)
+    else:
+        for j in range(n):
+            ax_coord.plot(t, theta[:, j] - theta.mean(axis=1), color=vessel_color(j), lw=1.0)
+        ax_coord.set_ylabel("(x_j − D_xj) − mean_k [m]")
+    ax_coord.set_title("(d) along-track coordination errors", fontsize=9)
+    ax_coord.set_xlabel("t [s]")
+
+    # (e) speeds
+    for j in range(n):
+        ax_u.plot(t, s[:, j, 3], color=vessel_color(j), lw=1.2)
+        if np.any(np.isfinite(traj.commanded_speed[:, j])):
+            ax_u.step(t[:-1], traj.commanded_speed[:, j], where="post", color=vessel_color(j), lw=0.8, ls=":")
+    ax_u.plot(t, traj.u_d, color="k", lw=0.8, ls="--", label="u_d")
+    for bound in (cfg.u_min, cfg.u_max):
+        ax_u.axhline(bound, color="0.5", lw=0.8, ls="-.")
+    ax_u.set_ylabel("u_j (solid), u_cj (dotted) [m/s]")
+    ax_u.set_title(f"(e) surge and commanded speeds; band (U_min, U_max) = ({cfg.u_min:g}, {cfg.u_max:g})", fontsize=9)
+    ax_u.set_xlabel("t [s]")
+    ax_u.legend(fontsize=7, loc="upper right")
+
+    for ax in (ax_ct, ax_psi, ax_coord):
+        ax.axhline(0.0, color="k", lw=0.5, alpha=0.5)
+    for ax in (ax_path, ax_ct, ax_psi, ax_coord, ax_u):
+        ax.grid(alpha=0.3)
+    fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
+    fig.tight_layout()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path)
+    return fig
