@@ -27,6 +27,9 @@ import numpy as np
 from marine_formation_env.dynamics import accelerations, wrap_angle
 from marine_formation_env.params import Gains, VesselParams
 
+#: ``(a_u, v̇, a_r)`` as returned by :func:`~marine_formation_env.dynamics.accelerations`.
+Accelerations = tuple[np.ndarray, np.ndarray, np.ndarray]
+
 __all__ = [
     "consensus_speed",
     "heading_tracking_inputs",
@@ -110,9 +113,14 @@ def yaw_law(
     r_d: np.ndarray,
     r_d_dot: np.ndarray,
     k_r: float,
+    acc: Accelerations | None = None,
 ) -> np.ndarray:
-    """Yaw acceleration input τ_r [rad/s²] of (13): gives ``ṙ = ṙ_d − k_r·(r − r_d)``."""
-    _, _, a_r = accelerations(p, u, v, r)
+    """Yaw acceleration input τ_r [rad/s²] of (13): gives ``ṙ = ṙ_d − k_r·(r − r_d)``.
+
+    ``acc`` are :func:`~marine_formation_env.dynamics.accelerations` of the
+    state, if already computed.
+    """
+    _, _, a_r = accelerations(p, u, v, r) if acc is None else acc
     return -a_r + r_d_dot - k_r * (r - r_d)
 
 
@@ -126,6 +134,7 @@ def los_yaw_reference(
     tau_u: np.ndarray,
     gains: Gains,
     as_printed: bool = False,
+    acc: Accelerations | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Desired yaw rate (14), corrected, and its derivative (SPEC §3).
 
@@ -147,7 +156,7 @@ def los_yaw_reference(
     """
     delta = gains.delta
     c, s = np.cos(psi), np.sin(psi)
-    a_u, v_dot, _ = accelerations(p, u, v, r)
+    a_u, v_dot, _ = accelerations(p, u, v, r) if acc is None else acc
     u_dot = a_u + tau_u
     y_dot = u * s + v * c
     y_ddot = u_dot * s + u * r * c + v_dot * c - v * r * s
@@ -186,6 +195,7 @@ def path_following_inputs(
     u_c: np.ndarray,
     u_c_dot: np.ndarray | float,
     as_printed: bool = False,
+    acc: Accelerations | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The paper's complete path-following controller: (11) + (12)-(14) + (13).
 
@@ -193,13 +203,15 @@ def path_following_inputs(
         e: cross-track error ``y − D_y`` [m].
         psi, u, v, r: own heading [rad] and body velocities.
         u_c, u_c_dot: commanded surge speed [m/s] and its rate [m/s²].
+        acc: accelerations of the state, if already computed.
 
     Returns:
         ``(τ_u, τ_r)`` [m/s², rad/s²].
     """
+    acc = accelerations(p, u, v, r) if acc is None else acc
     tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u, as_printed)
-    r_d, r_d_dot = los_yaw_reference(p, e, psi, u, v, r, tau_u, gains, as_printed)
-    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r)
+    r_d, r_d_dot = los_yaw_reference(p, e, psi, u, v, r, tau_u, gains, as_printed, acc)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)
 
 
 def heading_tracking_inputs(
@@ -212,6 +224,7 @@ def heading_tracking_inputs(
     u_c: np.ndarray,
     psi_d: np.ndarray,
     as_printed: bool = False,
+    acc: Accelerations | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Surge (11) and yaw (13) loops tracking a held ``(u_c, ψ_d)`` command.
 
@@ -220,4 +233,4 @@ def heading_tracking_inputs(
     """
     tau_u = surge_law(p, u, v, r, u_c, 0.0, gains.k_u, as_printed)
     r_d, r_d_dot = heading_yaw_reference(psi, r, psi_d, gains.k_psi)
-    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
-from marine_formation_env.dynamics import PSI, R, U, V, X, Y, rk4_step, vessel_rhs, wrap_angle
+from marine_formation_env.dynamics import PSI, R, U, V, X, Y, accelerations, rk4_step, vessel_rhs, wrap_angle
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -253,19 +253,19 @@ class FormationCore:
             psi_d = commands["psi_d"]
 
             def rhs_guidance(s: np.ndarray) -> np.ndarray:
-                tau_u, tau_r = heading_tracking_inputs(
-                    p, gains, s[..., PSI], s[..., U], s[..., V], s[..., R], u_c, psi_d, printed
-                )
-                return vessel_rhs(p, s, tau_u, tau_r)
+                psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
+                acc = accelerations(p, u, v, r)
+                tau_u, tau_r = heading_tracking_inputs(p, gains, psi, u, v, r, u_c, psi_d, printed, acc)
+                return vessel_rhs(p, s, tau_u, tau_r, acc)
 
             return rhs_guidance
         dy = self._dy
 
         def rhs_speed(s: np.ndarray) -> np.ndarray:
-            tau_u, tau_r = path_following_inputs(
-                p, gains, s[..., Y] - dy, s[..., PSI], s[..., U], s[..., V], s[..., R], u_c, 0.0, printed
-            )
-            return vessel_rhs(p, s, tau_u, tau_r)
+            psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
+            acc = accelerations(p, u, v, r)
+            tau_u, tau_r = path_following_inputs(p, gains, s[..., Y] - dy, psi, u, v, r, u_c, 0.0, printed, acc)
+            return vessel_rhs(p, s, tau_u, tau_r, acc)
 
         return rhs_speed
 

@@ -59,7 +59,13 @@ def accelerations(
     return a_u, v_dot, a_r
 
 
-def vessel_rhs(p: VesselParams, state: np.ndarray, tau_u: np.ndarray, tau_r: np.ndarray) -> np.ndarray:
+def vessel_rhs(
+    p: VesselParams,
+    state: np.ndarray,
+    tau_u: np.ndarray,
+    tau_r: np.ndarray,
+    acc: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
     """Time derivative of ``state`` (shape ``(..., 6)``) under inputs τ_u, τ_r (eqs. 1-4).
 
     Args:
@@ -67,13 +73,14 @@ def vessel_rhs(p: VesselParams, state: np.ndarray, tau_u: np.ndarray, tau_r: np.
         state: ``(..., 6)`` array, columns ``x, y, psi, u, v, r``.
         tau_u: surge acceleration input [m/s²], shape ``state.shape[:-1]``.
         tau_r: yaw acceleration input [rad/s²], shape ``state.shape[:-1]``.
+        acc: :func:`accelerations` of this state, if already computed.
 
     Returns:
         ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
     """
     psi, u, v, r = state[..., PSI], state[..., U], state[..., V], state[..., R]
     c, s = np.cos(psi), np.sin(psi)
-    a_u, v_dot, a_r = accelerations(p, u, v, r)
+    a_u, v_dot, a_r = accelerations(p, u, v, r) if acc is None else acc
     out = np.empty_like(state)
     out[..., X] = u * c - v * s
     out[..., Y] = u * s + v * c
