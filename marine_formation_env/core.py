@@ -31,6 +31,7 @@ vessel", "the one after" and so on in the same place for every vessel.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -138,6 +139,9 @@ class FormationCore:
         self.state = np.zeros((self.num_envs, n, 6))
         self.time = np.zeros(self.num_envs)
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
+        self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
+        self._last_psi_d = np.zeros((self.num_envs, n))  # previous ψ_d [rad] (guidance)
+        self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(self, rng: np.random.Generator) -> np.ndarray:
@@ -175,11 +179,12 @@ class FormationCore:
                 f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}"
             )
         if not np.all(np.isfinite(arr)):
-            bad = tuple(np.argwhere(~np.isfinite(arr))[0])
+            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
             raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
         self.state[ids] = arr
         self.time[ids] = 0.0
         self.steps[ids] = 0
+        self._fresh[ids] = True  # the first command after a reset is held, not ramped
         return self.observe()[ids]
 
     # ------------------------------------------------------------------- step
@@ -231,40 +236,63 @@ class FormationCore:
             bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
         commands = self.physical_commands(actions)
+        if self._fresh.any():
+            fresh = self._fresh
+            if "u_c" in commands:
+                self._last_u_c[fresh] = commands["u_c"][fresh]
+            if "psi_d" in commands:
+                self._last_psi_d[fresh] = commands["psi_d"][fresh]
+            self._fresh[:] = False
         rhs = self._closed_loop(commands)
         h = cfg.dt / cfg.substeps
         state = self.state
-        for _ in range(cfg.substeps):
-            state = rk4_step(rhs, state, h)
+        for k in range(cfg.substeps):
+            state = rk4_step(rhs, state, h, k * h)
         self.state = state
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
+        if "u_c" in commands:
+            self._last_u_c = commands["u_c"]
+        if "psi_d" in commands:
+            self._last_psi_d = commands["psi_d"]
         return self._outputs(np.clip(actions, -1.0, 1.0), commands.get("u_c"))
 
-    def _closed_loop(self, commands: dict[str, np.ndarray]):  # type: ignore[no-untyped-def]
-        """The vector field of the vessels under the level's held command."""
+    def _closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
+        """The vector field ``rhs(t, state)`` of the vessels over one control period.
+
+        ``force``: the inputs are held. ``speed``/``guidance``: the commands are
+        ramped from the previous period's to the new ones (first-order hold)
+        and the inner loops receive the ramp's slope as ``u̇_c`` (``ψ̇_d``);
+        the first command after a reset is held (zero slope).
+        """
         cfg = self.config
         p, gains, printed = cfg.params, cfg.gains, cfg.paper_as_printed
         if cfg.action_level == "force":
             tau_u, tau_r = commands["tau_u"], commands["tau_r"]
-            return lambda s: vessel_rhs(p, s, tau_u, tau_r)
-        u_c = commands["u_c"]
+            return lambda _t, s: vessel_rhs(p, s, tau_u, tau_r)
+        u_c0 = self._last_u_c
+        u_c_dot = (commands["u_c"] - u_c0) / cfg.dt
         if cfg.action_level == "guidance":
-            psi_d = commands["psi_d"]
+            psi_d0 = self._last_psi_d
+            psi_d_dot = (commands["psi_d"] - psi_d0) / cfg.dt
 
-            def rhs_guidance(s: np.ndarray) -> np.ndarray:
+            def rhs_guidance(t: float, s: np.ndarray) -> np.ndarray:
                 psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
                 acc = accelerations(p, u, v, r)
-                tau_u, tau_r = heading_tracking_inputs(p, gains, psi, u, v, r, u_c, psi_d, printed, acc)
+                tau_u, tau_r = heading_tracking_inputs(
+                    p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d0 + psi_d_dot * t, printed, acc, u_c_dot, psi_d_dot
+                )
                 return vessel_rhs(p, s, tau_u, tau_r, acc)
 
             return rhs_guidance
         dy = self._dy
 
-        def rhs_speed(s: np.ndarray) -> np.ndarray:
+        def rhs_speed(t: float, s: np.ndarray) -> np.ndarray:
             psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
             acc = accelerations(p, u, v, r)
-            tau_u, tau_r = path_following_inputs(p, gains, s[..., Y] - dy, psi, u, v, r, u_c, 0.0, printed, acc)
+            tau_u, tau_r = path_following_inputs(
+                p, gains, s[..., Y] - dy, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
+            )
             return vessel_rhs(p, s, tau_u, tau_r, acc)
 
         return rhs_speed

@@ -28,7 +28,9 @@ X, Y, PSI, U, V, R = range(6)
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
     """Wrap an angle [rad] to ``[−π, π)`` (Fossen's smallest signed angle)."""
-    return np.mod(np.asarray(angle) + np.pi, 2.0 * np.pi) - np.pi
+    wrapped = np.mod(np.asarray(angle) + np.pi, 2.0 * np.pi) - np.pi
+    # np.mod rounds a tiny negative argument up to 2π; keep the interval half-open.
+    return np.where(wrapped >= np.pi, wrapped - 2.0 * np.pi, wrapped)
 
 
 def accelerations(
@@ -91,15 +93,15 @@ def vessel_rhs(
     return out
 
 
-def rk4_step(rhs: Callable[[np.ndarray], np.ndarray], state: np.ndarray, h: float) -> np.ndarray:
-    """One classical fourth-order Runge-Kutta step of ``ẏ = rhs(y)`` with step ``h`` [s].
+def rk4_step(rhs: Callable[[float, np.ndarray], np.ndarray], state: np.ndarray, h: float, t: float = 0.0) -> np.ndarray:
+    """One classical fourth-order Runge-Kutta step of ``ẏ = rhs(t, y)`` from time ``t`` with step ``h`` [s].
 
-    ``rhs`` is autonomous: time-varying inputs must be held over the step or be
-    functions of the state (the closed-loop inner controllers are the latter,
-    which is why they are evaluated at every stage).
+    ``rhs`` follows scipy's ``fun(t, y)`` convention. The closed-loop inner
+    controllers are part of ``rhs``, which is why they act at every stage.
     """
-    k1 = rhs(state)
-    k2 = rhs(state + (0.5 * h) * k1)
-    k3 = rhs(state + (0.5 * h) * k2)
-    k4 = rhs(state + h * k3)
+    half = 0.5 * h
+    k1 = rhs(t, state)
+    k2 = rhs(t + half, state + half * k1)
+    k3 = rhs(t + half, state + half * k2)
+    k4 = rhs(t + h, state + h * k3)
     return state + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)

@@ -38,9 +38,17 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ## Action Space
 
     ``Box(-1, 1, (A,), float32)`` per agent, at the chosen ``action_level``.
-    Finite values outside [−1, 1] are clipped; NaN/inf raise. The command is
-    held over the control period ``dt``; the built-in loops run inside the
-    integrator (every RK4 stage of every substep).
+    Finite values outside [−1, 1] are clipped; NaN/inf raise. The policy acts
+    once per control period ``dt``; the built-in loops run inside the
+    integrator (every RK4 stage of every substep). `force` inputs are held over
+    the period. `speed`/`guidance` commands are ramped linearly from the
+    previous command to the new one over the period (first-order hold; the
+    first command after a reset is held) and the loops get the ramp's slope as
+    u̇_c (ψ̇_d). The ramp stays inside the command ranges, and it gives the
+    surge law (11) the u̇_c it needs: a held command would make u lag u_c by
+    1/(k_u + d11/m11) ≈ 2 s, which destabilizes consensus on one-way rings of
+    four or more vessels. A command that jumps by Δ asks for a surge
+    acceleration of about Δ/dt.
 
     | level      | index | meaning                      | unit   | a = −1        | a = +1       |
     |------------|-------|------------------------------|--------|---------------|--------------|

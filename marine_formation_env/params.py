@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 
@@ -243,6 +244,7 @@ class Gains:
     def __post_init__(self) -> None:
         for key in ("k_u", "k_psi", "k_r", "delta", "a"):
             value = getattr(self, key)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+            if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value > 0.0):
                 name = "Δ (delta)" if key == "delta" else key
-                raise ParameterError(f"gain {name} must be finite and > 0, got {value!r}")
+                raise ParameterError(f"gain {name} must be a finite number > 0, got {value!r}")
+            object.__setattr__(self, key, float(value))
