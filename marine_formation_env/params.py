@@ -244,7 +244,8 @@ class Gains:
     def __post_init__(self) -> None:
         for key in ("k_u", "k_psi", "k_r", "delta", "a"):
             value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, Real) or not (math.isfinite(value) and value > 0.0):
+            number = float(value) if isinstance(value, Real) and not isinstance(value, bool) else math.nan
+            if not (math.isfinite(number) and number > 0.0):
                 name = "Δ (delta)" if key == "delta" else key
                 raise ParameterError(f"gain {name} must be a finite number > 0, got {value!r}")
-            object.__setattr__(self, key, float(value))
+            object.__setattr__(self, key, number)
