@@ -95,10 +95,7 @@ class CommGraph:
     def from_edges(cls, n: int, edges: Iterable[Sequence[int]], name: str = "custom") -> CommGraph:
         """From edges ``(j, i)`` in the paper's convention: ``i`` transmits to ``j``."""
         n = _check_n(n)
-        adj = np.zeros((n, n), dtype=bool)
-        for j, i in _as_pairs(edges, n, "edge"):
-            adj[j, i] = True
-        return cls(adj, name)
+        return cls.from_links(n, [(i, j) for j, i in _as_pairs(edges, n, "edge")], name)
 
     @classmethod
     def from_links(cls, n: int, links: Iterable[Sequence[int]], name: str = "custom") -> CommGraph:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from independent_model import model_rhs
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
@@ -30,27 +31,9 @@ from marine_formation_env.control import (
     surge_law,
     yaw_law,
 )
-from marine_formation_env.params import SUPPLY, Gains, VesselParams
+from marine_formation_env.params import SUPPLY, Gains
 
 GAINS = Gains()  # paper values (SPEC §5)
-
-
-def plant(p: VesselParams, state: np.ndarray, tau_u: float, tau_r: float) -> np.ndarray:
-    """Paper eqs. (1)-(4): M ν̇ + C(ν)ν + Dν = M[τ_u, 0, τ_r]ᵀ, one state of shape (6,)."""
-    _, _, psi, u, v, r = state
-    m_mat = np.array([[p.m11, 0.0, 0.0], [0.0, p.m22, p.m23], [0.0, p.m23, p.m33]])
-    d_mat = np.array([[p.d11, 0.0, 0.0], [0.0, p.d22, p.d23], [0.0, p.d32, p.d33]])
-    c_mat = np.array(
-        [
-            [0.0, 0.0, -p.m22 * v - p.m23 * r],
-            [0.0, 0.0, p.m11 * u],
-            [p.m22 * v + p.m23 * r, -p.m11 * u, 0.0],
-        ]
-    )
-    nu = np.array([u, v, r])
-    nu_dot = np.array([tau_u, 0.0, tau_r]) - np.linalg.solve(m_mat, (c_mat + d_mat) @ nu)
-    c, s = math.cos(psi), math.sin(psi)
-    return np.array([u * c - v * s, u * s + v * c, r, *nu_dot])
 
 
 def _integrate(f, s0: np.ndarray, t_end: float, **kw) -> np.ndarray:
@@ -132,7 +115,7 @@ def test_corrected_surge_law_gives_exponential_tracking_at_zero_sway_yaw() -> No
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
         tau_u = float(surge_law(p, s[3], s[4], s[5], u_c, 0.0, k_u))
-        return plant(p, s, tau_u, 0.0)
+        return model_rhs(p, s, tau_u, 0.0)
 
     u0 = 3.0
     t_eval = np.linspace(0.0, 20.0, 21)
@@ -153,7 +136,7 @@ def test_corrected_surge_law_with_turning_and_time_varying_command() -> None:
         uc, uc_dot = u_c(t)
         tau_u = float(surge_law(p, s[3], s[4], s[5], uc, uc_dot, k_u))
         tau_r = 0.002 * math.sin(0.5 * t)  # some arbitrary turning
-        return plant(p, s, tau_u, tau_r)
+        return model_rhs(p, s, tau_u, tau_r)
 
     s0 = np.array([0.0, 0.0, 0.2, 6.5, 0.4, 0.03])
     t_eval = np.linspace(0.0, 15.0, 16)
@@ -173,7 +156,7 @@ def test_printed_surge_law_settles_below_command() -> None:
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
         tau_u = float(surge_law(p, s[3], s[4], s[5], u_c, 0.0, k_u, as_printed=True))
-        return plant(p, s, tau_u, 0.0)
+        return model_rhs(p, s, tau_u, 0.0)
 
     u0 = 3.0
     t_eval = np.array([0.0, 2.0, 5.0, 10.0, 80.0])
@@ -193,7 +176,7 @@ def test_yaw_law_gives_first_order_yaw_rate_error() -> None:
         r_d, r_d_dot, k_r = rng.uniform(-0.2, 0.2), rng.uniform(-0.05, 0.05), rng.uniform(0.1, 10)
         tau_r = float(yaw_law(SUPPLY, s[3], s[4], s[5], r_d, r_d_dot, k_r))
         tau_u = rng.normal()
-        r_dot = plant(SUPPLY, s, tau_u, tau_r)[5]
+        r_dot = model_rhs(SUPPLY, s, tau_u, tau_r)[5]
         assert r_dot == pytest.approx(r_d_dot - k_r * (s[5] - r_d), rel=1e-9, abs=1e-13)
 
 
@@ -206,7 +189,7 @@ def test_yaw_law_is_batched() -> None:
     for i in range(2):
         for j in range(3):
             s = np.array([0, 0, 0, u[i, j], v[i, j], r[i, j]])
-            r_dot = plant(SUPPLY, s, 0.0, float(out[i, j]))[5]
+            r_dot = model_rhs(SUPPLY, s, 0.0, float(out[i, j]))[5]
             assert r_dot == pytest.approx(r_d_dot[i, j] - 5.0 * (r[i, j] - r_d[i, j]), rel=1e-9, abs=1e-13)
 
 
@@ -227,7 +210,7 @@ def _los_closed_loop(as_printed: bool):
     def f(t: float, s: np.ndarray) -> np.ndarray:
         r_d, r_d_dot, tau_u = refs(s)
         tau_r = float(yaw_law(p, s[3], s[4], s[5], r_d, r_d_dot, g.k_r))
-        return plant(p, s, tau_u, tau_r)
+        return model_rhs(p, s, tau_u, tau_r)
 
     return refs, f
 
@@ -302,7 +285,7 @@ def test_corrected_path_following_gives_papers_error_dynamics() -> None:
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
         tau_u, tau_r = path_following_inputs(p, g, s[1] - D_Y, s[2], s[3], s[4], s[5], U_C, 0.0)
-        return plant(p, s, float(tau_u), float(tau_r))
+        return model_rhs(p, s, float(tau_u), float(tau_r))
 
     # vessel_1 of the paper scenario (SPEC §5) relative to a path at D_Y
     s0 = np.array([-60.0, D_Y + 30.0, 0.3, 3.0, 0.0, 0.0])
@@ -327,7 +310,7 @@ def test_printed_yaw_reference_violates_16() -> None:
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
         tau_u, tau_r = path_following_inputs(p, g, s[1] - D_Y, s[2], s[3], s[4], s[5], U_C, 0.0, as_printed=True)
-        return plant(p, s, float(tau_u), float(tau_r))
+        return model_rhs(p, s, float(tau_u), float(tau_r))
 
     s0 = np.array([-60.0, D_Y + 30.0, 0.3, 3.0, 0.0, 0.0])
     sol = _integrate(f, s0, 12.0, t_eval=[12.0])
@@ -368,7 +351,7 @@ def test_heading_tracking_closed_loop_is_linear_second_order() -> None:
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
         tau_u, tau_r = heading_tracking_inputs(p, g, s[2], s[3], s[4], s[5], 5.0, psi_d)
-        return plant(p, s, float(tau_u), float(tau_r))
+        return model_rhs(p, s, float(tau_u), float(tau_r))
 
     s0 = np.array([0.0, 0.0, 0.5, 4.0, 0.1, 0.02])
     t_eval = np.linspace(0.0, 10.0, 11)
