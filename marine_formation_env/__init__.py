@@ -30,8 +30,31 @@ from marine_formation_env.scenarios import (
 
 __version__ = "0.1.0"
 
+ENV_ID = "MarineFormation-v0"
+
+
+def _register() -> None:
+    """Register the gymnasium views (and the ParallelEnv with PettingZoo's registry, if it has one)."""
+    import gymnasium
+
+    if ENV_ID not in gymnasium.registry:
+        gymnasium.register(
+            id=ENV_ID,
+            entry_point="marine_formation_env.gym_env:MarineFormationGymEnv",
+            vector_entry_point="marine_formation_env.vector:MarineFormationVectorEnv",
+        )
+    import pettingzoo
+
+    registry = getattr(pettingzoo, "parallel_registry", None)
+    if registry is not None and ENV_ID not in registry:
+        pettingzoo.register("parallel", ENV_ID, entry_point="marine_formation_env.env:parallel_env")
+
+
+_register()
+
 __all__ = [
     "ACTION_LEVELS",
+    "ENV_ID",
     "GRAPH_PRESETS",
     "SCENARIOS",
     "SUPPLY",

@@ -174,18 +174,14 @@ def los_yaw_reference(
 
 
 def heading_yaw_reference(
-    psi: np.ndarray,
-    r: np.ndarray,
-    psi_d: np.ndarray,
-    k_psi: float,
-    psi_d_dot: np.ndarray | float = 0.0,
+    psi: np.ndarray, r: np.ndarray, psi_d: np.ndarray, k_psi: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Desired yaw rate for a heading command ψ_d(t) that changes at a constant rate (``guidance``).
+    """Desired yaw rate for a held heading command ψ_d (the ``guidance`` level).
 
-    ``r_d = ψ̇_d − k_ψ·(ψ − ψ_d)`` and ``ṙ_d = −k_ψ·(r − ψ̇_d)`` (ψ̈_d = 0):
-    (14) with the LOS angle replaced by ψ_d.
+    ``r_d = −k_ψ·(ψ − ψ_d)`` and, with ψ_d constant over the control period,
+    ``ṙ_d = −k_ψ·r``. This is (14) with the LOS angle replaced by ψ_d.
     """
-    return psi_d_dot - k_psi * wrap_angle(psi - psi_d), -k_psi * (r - psi_d_dot)
+    return -k_psi * wrap_angle(psi - psi_d), -k_psi * r
 
 
 def path_following_inputs(
@@ -230,13 +226,12 @@ def heading_tracking_inputs(
     as_printed: bool = False,
     acc: Accelerations | None = None,
     u_c_dot: np.ndarray | float = 0.0,
-    psi_d_dot: np.ndarray | float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Surge (11) and yaw (13) loops tracking a ``(u_c, ψ_d)`` command with rates ``(u̇_c, ψ̇_d)``.
+    """Surge (11) and yaw (13) loops tracking ``u_c`` (with rate ``u̇_c``) and a held heading ``ψ_d``.
 
     Returns:
         ``(τ_u, τ_r)`` [m/s², rad/s²].
     """
     tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u, as_printed)
-    r_d, r_d_dot = heading_yaw_reference(psi, r, psi_d, gains.k_psi, psi_d_dot)
+    r_d, r_d_dot = heading_yaw_reference(psi, r, psi_d, gains.k_psi)
     return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)

@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from gymnasium import spaces
 
 from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
 from marine_formation_env.dynamics import PSI, R, U, V, X, Y, accelerations, rk4_step, vessel_rhs, wrap_angle
@@ -91,7 +92,9 @@ class StepOutput:
         truncated: ``(B,)`` time limit reached (and not terminated).
         components: reward components, each ``(B, N)``; they sum to ``reward``.
         commanded_speed: ``(B, N)`` u_c [m/s] applied (``speed``/``guidance``), else None.
-        collision: ``(B,)``; out_of_bounds: ``(B,)``.
+        collision: ``(B,)`` two vessels closer than the safety distance.
+        out_of_bounds: ``(B,)`` a vessel left the workspace or the envelope
+            (|u|, |v| > max_speed, |r| > max_yaw_rate), or the state is not finite.
     """
 
     observation: np.ndarray
@@ -136,12 +139,50 @@ class FormationCore:
         self._slot_index = np.array([self.layout.slot_vessels(j) for j in range(n)], dtype=np.intp).reshape(n, n - 1)
         self._slot_mask = config.graph.adjacency[np.arange(n)[:, None], self._slot_index].astype(float)
         self._pairs = np.triu_indices(n, k=1)
+        self.obs_low, self.obs_high = self._observation_bounds()
         self.state = np.zeros((self.num_envs, n, 6))
         self.time = np.zeros(self.num_envs)
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
-        self._last_psi_d = np.zeros((self.num_envs, n))  # previous ψ_d [rad] (guidance)
         self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
+
+    def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-agent observation bounds ``(low, high)`` (float32, see :meth:`observation_space`)."""
+        cfg = self.config
+        x_lo, x_hi, y_lo, y_hi = cfg.workspace
+        d = cfg.formation
+        rate = max(2.0 * np.pi * cfg.u_d.amplitude / cfg.u_d.period, 0.1)
+        own_high = [
+            max(abs(y_lo), abs(y_hi)) + float(np.max(np.abs(d[:, 1]))),  # e_j
+            np.pi,  # ψ
+            cfg.max_speed,  # u
+            cfg.max_speed,  # v
+            cfg.max_yaw_rate,  # r
+            cfg.u_max,  # u_d ∈ [U_min + a, U_max − a] by (19)
+            rate,  # u̇_d
+        ]
+        own_low = [-own_high[0], -np.pi, -cfg.max_speed, -cfg.max_speed, -cfg.max_yaw_rate, cfg.u_min, -rate]
+        dtheta = (x_hi - x_lo) + float(np.ptp(d[:, 0]))
+        dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
+        slot_low = [0.0, -dtheta, -dxdot, 0.0]
+        slot_high = [1.0, dtheta, dxdot, cfg.horizon]
+        low = np.array(own_low + slot_low * (self.n - 1), dtype=np.float32)
+        high = np.array(own_high + slot_high * (self.n - 1), dtype=np.float32)
+        return low, high
+
+    def observation_space(self) -> spaces.Box:
+        """One vessel's observation space.
+
+        Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|;
+        ψ in [−π, π]; u, v in ±max_speed; r in ±max_yaw_rate; u_d in
+        [U_min, U_max]; u̇_d within the profile's range (at least ±0.1 m/s²); link bits in
+        [0, 1]; coordination differences within the workspace's x-extent plus the
+        spread of D_x; ẋ differences within ±2√2·max_speed; ages in
+        [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
+        envelope terminates, so only its last observation can reach past the
+        bounds, and it is clipped to them.
+        """
+        return spaces.Box(self.obs_low, self.obs_high, dtype=np.float32)
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(self, rng: np.random.Generator) -> np.ndarray:
@@ -240,8 +281,6 @@ class FormationCore:
             fresh = self._fresh
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
-            if "psi_d" in commands:
-                self._last_psi_d[fresh] = commands["psi_d"][fresh]
             self._fresh[:] = False
         rhs = self._closed_loop(commands)
         h = cfg.dt / cfg.substeps
@@ -253,17 +292,15 @@ class FormationCore:
         self.steps = self.steps + 1
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
-        if "psi_d" in commands:
-            self._last_psi_d = commands["psi_d"]
         return self._outputs(np.clip(actions, -1.0, 1.0), commands.get("u_c"))
 
     def _closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
         """The vector field ``rhs(t, state)`` of the vessels over one control period.
 
-        ``force``: the inputs are held. ``speed``/``guidance``: the commands are
-        ramped from the previous period's to the new ones (first-order hold)
-        and the inner loops receive the ramp's slope as ``u̇_c`` (``ψ̇_d``);
-        the first command after a reset is held (zero slope).
+        ``force`` inputs and the ``guidance`` heading ψ_d are held. The commanded
+        speed u_c (``speed``, ``guidance``) is ramped from the previous period's
+        to the new one (first-order hold) and (11) receives the ramp's slope as
+        ``u̇_c``; the first command after a reset is held (zero slope).
         """
         cfg = self.config
         p, gains, printed = cfg.params, cfg.gains, cfg.paper_as_printed
@@ -273,14 +310,13 @@ class FormationCore:
         u_c0 = self._last_u_c
         u_c_dot = (commands["u_c"] - u_c0) / cfg.dt
         if cfg.action_level == "guidance":
-            psi_d0 = self._last_psi_d
-            psi_d_dot = (commands["psi_d"] - psi_d0) / cfg.dt
+            psi_d = commands["psi_d"]
 
             def rhs_guidance(t: float, s: np.ndarray) -> np.ndarray:
                 psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
                 acc = accelerations(p, u, v, r)
                 tau_u, tau_r = heading_tracking_inputs(
-                    p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d0 + psi_d_dot * t, printed, acc, u_c_dot, psi_d_dot
+                    p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d, printed, acc, u_c_dot
                 )
                 return vessel_rhs(p, s, tau_u, tau_r, acc)
 
@@ -322,7 +358,7 @@ class FormationCore:
         slots[..., 0] = self._slot_mask
         slots[..., 1] = self._slot_mask * (theta[:, :, None] - theta[:, idx])
         slots[..., 2] = self._slot_mask * (x_dot[:, :, None] - x_dot[:, idx])
-        return out
+        return np.clip(out, self.obs_low, self.obs_high, out=out)
 
     def global_state(self) -> np.ndarray:
         """``(B, N·6 + 1)`` float32: every vessel's state (ψ wrapped) and the time [s]."""
@@ -356,7 +392,14 @@ class FormationCore:
         )
         collision = self._min_separation(s) < cfg.safety_distance
         unstable = ~np.all(np.isfinite(s), axis=(1, 2))
-        terminated = out_of_bounds | collision | unstable
+        out_of_envelope = np.any(
+            (np.abs(s[..., U]) > cfg.max_speed)
+            | (np.abs(s[..., V]) > cfg.max_speed)
+            | (np.abs(s[..., R]) > cfg.max_yaw_rate),
+            axis=1,
+        )
+        out_of_bounds = out_of_bounds | out_of_envelope | unstable
+        terminated = out_of_bounds | collision
         time_left = np.maximum(cfg.horizon - self.time, 0.0)
         penalty = -w.total_weight * time_left if w.terminal_penalty else np.zeros_like(time_left)
         components["terminal"] = np.where(terminated, penalty, 0.0)[:, None] * np.ones((1, self.n))
@@ -370,5 +413,5 @@ class FormationCore:
             components=components,
             commanded_speed=None if u_c is None else np.array(u_c, copy=True),
             collision=collision,
-            out_of_bounds=out_of_bounds | unstable,
+            out_of_bounds=out_of_bounds,
         )

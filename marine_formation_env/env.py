@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import warnings
 from typing import Any, ClassVar
 
@@ -40,15 +39,15 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ``Box(-1, 1, (A,), float32)`` per agent, at the chosen ``action_level``.
     Finite values outside [−1, 1] are clipped; NaN/inf raise. The policy acts
     once per control period ``dt``; the built-in loops run inside the
-    integrator (every RK4 stage of every substep). `force` inputs are held over
-    the period. `speed`/`guidance` commands are ramped linearly from the
-    previous command to the new one over the period (first-order hold; the
-    first command after a reset is held) and the loops get the ramp's slope as
-    u̇_c (ψ̇_d). The ramp stays inside the command ranges, and it gives the
-    surge law (11) the u̇_c it needs: a held command would make u lag u_c by
-    1/(k_u + d11/m11) ≈ 2 s, which destabilizes consensus on one-way rings of
-    four or more vessels. A command that jumps by Δ asks for a surge
-    acceleration of about Δ/dt.
+    integrator (every RK4 stage of every substep). `force` inputs and the
+    `guidance` heading are held over the period. The commanded speed u_c
+    (`speed`, `guidance`) is ramped linearly from the previous command to the
+    new one over the period (first-order hold; the first command after a reset
+    is held) and the surge law (11) gets the ramp's slope as u̇_c, which (11)
+    needs: a held u_c would make u lag it by 1/(k_u + d11/m11) ≈ 2 s, and that
+    lag destabilizes the consensus on one-way rings of four or more vessels.
+    The ramp stays inside [U_min, U_max]; a command that jumps by Δ asks for a
+    surge acceleration of about Δ/dt.
 
     | level      | index | meaning                      | unit   | a = −1        | a = +1       |
     |------------|-------|------------------------------|--------|---------------|--------------|
@@ -68,23 +67,30 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box(-inf, inf, (7 + 4·(n−1),), float32)`` per agent; own quantities
+    ``Box(low, high, (7 + 4·(n−1),), float32)`` per agent; own quantities
     first, then one 4-entry slot per other vessel ``i = (j + k + 1) mod n``,
-    ``k = 0 … n−2``. Slot entries are zero when ``i ∉ A_j``.
+    ``k = 0 … n−2``. Slot entries are zero when ``i ∉ A_j``. The bounds are
+    finite (``FormationCore.observation_space`` documents each): the workspace
+    and the speed envelope bound every entry, and the last observation of a
+    formation that leaves them is clipped.
 
-    | index     | observation                              | unit   | min  | max |
-    |-----------|------------------------------------------|--------|------|-----|
-    | 0         | cross-track error e_j = y_j − D_yj       | m      | -inf | inf |
-    | 1         | heading ψ_j, wrapped                     | rad    | -π   | π   |
-    | 2         | surge speed u_j                          | m/s    | -inf | inf |
-    | 3         | sway speed v_j                           | m/s    | -inf | inf |
-    | 4         | yaw rate r_j                             | rad/s  | -inf | inf |
-    | 5         | desired formation speed u_d(t)           | m/s    | -inf | inf |
-    | 6         | its rate u̇_d(t)                          | m/s²   | -inf | inf |
-    | 7 + 4k    | link bit: 1 iff i transmits to j         | –      | 0    | 1   |
-    | 8 + 4k    | (x_j − D_xj) − (x_i − D_xi)              | m      | -inf | inf |
-    | 9 + 4k    | ẋ_j − ẋ_i                                | m/s    | -inf | inf |
-    | 10 + 4k   | age of the received data (0: ideal link) | s      | 0    | inf |
+    | index     | observation                              | unit   | min      | max     |
+    |-----------|------------------------------------------|--------|----------|---------|
+    | 0         | cross-track error e_j = y_j − D_yj       | m      | −Y       | Y       |
+    | 1         | heading ψ_j, wrapped                     | rad    | −π       | π       |
+    | 2         | surge speed u_j                          | m/s    | −14      | 14      |
+    | 3         | sway speed v_j                           | m/s    | −14      | 14      |
+    | 4         | yaw rate r_j                             | rad/s  | −1       | 1       |
+    | 5         | desired formation speed u_d(t)           | m/s    | U_min    | U_max   |
+    | 6         | its rate u̇_d(t)                          | m/s²   | −ρ       | ρ       |
+    | 7 + 4k    | link bit: 1 iff i transmits to j         | –      | 0        | 1       |
+    | 8 + 4k    | (x_j − D_xj) − (x_i − D_xi)              | m      | −X       | X       |
+    | 9 + 4k    | ẋ_j − ẋ_i                                | m/s    | −39.6    | 39.6    |
+    | 10 + 4k   | age of the received data (0: ideal link) | s      | 0        | horizon |
+
+    Y = workspace y-extent + max |D_y|; X = workspace x-length + spread of D_x;
+    ρ = max(2π·amplitude/period of u_d, 0.1); 14 m/s and 1 rad/s are the
+    defaults of ``max_speed`` and ``max_yaw_rate`` (39.6 = 2√2·14).
 
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
     ``(x_i, ẋ_i)`` (SPEC §3), given relative to ``j``. ``state()`` returns the
@@ -122,7 +128,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
       state makes vessel_0 and vessel_1 cross paths 0.5 m apart under the
       paper's controller, which does not consider collisions), a vessel
       outside ``workspace`` (default: a box holding the whole nominal run with
-      500 m / 250 m margins), or a non-finite state.
+      500 m / 250 m margins), a vessel outside the envelope |u|, |v| ≤
+      max_speed (14 m/s), |r| ≤ max_yaw_rate (1 rad/s), or a non-finite state
+      (``infos[agent]["out_of_bounds"]``).
     * Truncation: after ``round(horizon/dt)`` steps (400 s: 800 steps at the
       default dt of `speed`/`guidance`, 4000 at `force`).
 
@@ -171,14 +179,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self.possible_agents = [f"vessel_{j}" for j in range(n)]
         self.agents: list[str] = []
         self._index = {agent: j for j, agent in enumerate(self.possible_agents)}
-        dim = self.core.layout.dim
-        low = np.full(dim, -np.inf, dtype=np.float32)
-        high = np.full(dim, np.inf, dtype=np.float32)
-        low[1], high[1] = -math.pi, math.pi
-        own, slot = self.core.layout.own, self.core.layout.slot
-        low[own::slot], high[own::slot] = 0.0, 1.0
-        low[own + 3 :: slot] = 0.0
-        self._observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._observation_space = self.core.observation_space()
         self._action_space = spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
         self.state_space = spaces.Box(-np.inf, np.inf, (n * 6 + 1,), dtype=np.float32)
         self.np_random, self.np_random_seed = seeding.np_random(None)

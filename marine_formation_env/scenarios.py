@@ -233,6 +233,9 @@ class ScenarioConfig:
             holds the whole nominal run with margins of 500 m (x) and 250 m (y).
         tau_u_max, tau_r_max: ``force``-level input ranges [m/s², rad/s²].
         psi_max: ``guidance``-level heading command range ±psi_max [rad].
+        max_speed: envelope of |u| and |v| [m/s]; beyond it the formation
+            terminates (the model is not meant for it). Must exceed u_max.
+        max_yaw_rate: envelope of |r| [rad/s]; beyond it the formation terminates.
         reward: reward weights and scales.
     """
 
@@ -259,6 +262,8 @@ class ScenarioConfig:
     tau_u_max: float = 3.0
     tau_r_max: float = 2.0
     psi_max: float = math.pi / 2
+    max_speed: float = 14.0
+    max_yaw_rate: float = 1.0
     reward: Any = field(default_factory=RewardConfig)
 
     def __post_init__(self) -> None:
@@ -312,7 +317,17 @@ class ScenarioConfig:
                 set_("gains", _build(Gains, self.gains, "gains"))
             else:
                 raise ConfigError(f"gains must be a Gains or a mapping, got {self.gains!r}")
-        for key in ("u_min", "u_max", "horizon", "safety_distance", "tau_u_max", "tau_r_max", "psi_max"):
+        for key in (
+            "u_min",
+            "u_max",
+            "horizon",
+            "safety_distance",
+            "tau_u_max",
+            "tau_r_max",
+            "psi_max",
+            "max_speed",
+            "max_yaw_rate",
+        ):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ConfigError(f"{key} must be a finite number, got {value!r}")
@@ -350,9 +365,11 @@ class ScenarioConfig:
         set_("substeps", int(substeps))
         if not self.horizon >= self.dt:
             raise ConfigError(f"horizon = {self.horizon} s must be at least one control period dt = {self.dt} s")
-        for key in ("tau_u_max", "tau_r_max", "psi_max"):
+        for key in ("tau_u_max", "tau_r_max", "psi_max", "max_yaw_rate"):
             if not getattr(self, key) > 0:
                 raise ConfigError(f"{key} must be > 0, got {getattr(self, key)!r}")
+        if not self.max_speed > self.u_max:
+            raise ConfigError(f"max_speed = {self.max_speed} m/s must exceed u_max = {self.u_max} m/s")
         if self.safety_distance < 0:
             raise ConfigError(f"safety_distance must be ≥ 0 m, got {self.safety_distance!r}")
 

@@ -1,0 +1,102 @@
+"""Centralized single-agent view: one gymnasium Env controls the whole formation.
+
+``gymnasium.make("MarineFormation-v0", **overrides)`` returns
+:class:`MarineFormationGymEnv`. It is the same simulation as the PettingZoo
+env (a one-formation view of :class:`~marine_formation_env.core.FormationCore`),
+with everything joined:
+
+* observation ``Box((N·dim,), float32)``: the N vessels' *masked* observations
+  concatenated in vessel order (vessel ``j`` occupies ``[j·dim, (j+1)·dim)``);
+  the layout of each block is the table of
+  :class:`~marine_formation_env.env.MarineFormationParallelEnv`;
+* action ``Box(-1, 1, (N·A,), float32)``: vessel ``j``'s action in
+  ``[j·A, (j+1)·A)``, same maps as the ParallelEnv;
+* reward: the mean of the vessels' rewards (the shared team reward);
+  ``info["vessel_rewards"]`` holds them all, ``info["reward_components"]``
+  the vessel-averaged terms;
+* termination and truncation: as the ParallelEnv (whole formation).
+
+Because each block is masked by the graph, a centralized policy still receives
+only what the vessels would; it may however combine the blocks, which a
+decentralized one cannot.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from marine_formation_env.core import FormationCore
+from marine_formation_env.scenarios import ScenarioConfig, make_config
+from marine_formation_env.vector import joint_info
+
+__all__ = ["MarineFormationGymEnv"]
+
+
+class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
+    """The whole formation as one gymnasium agent (see the module docstring).
+
+    Args:
+        scenario: scenario name; ``**overrides`` as for ``parallel_env``.
+        render_mode: ``"rgb_array"`` or ``"human"``.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.core = FormationCore(self.config, num_envs=1)
+        self.render_mode = render_mode
+        n, a = self.config.n_vessels, self.config.action_dim
+        block = self.core.observation_space()
+        self.observation_space = spaces.Box(np.tile(block.low, n), np.tile(block.high, n), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (n * a,), dtype=np.float32)
+        self._renderer: Any = None
+        self._done = True
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        """Start an episode; ``options={"initial_state": (n, 6)}`` sets the state exactly."""
+        super().reset(seed=seed)
+        initial = (options or {}).get("initial_state")
+        if initial is None:
+            initial = self.core.sample_initial_state(self.np_random)
+        obs = self.core.reset(initial)[0].reshape(-1)
+        self._done = False
+        if self.render_mode == "human":
+            self.render()
+        return obs, {}
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """Apply the joint action ``(N·A,)`` for one control period."""
+        if self._done:
+            raise RuntimeError("the episode has ended (or never started); call reset() before step()")
+        arr = np.asarray(action, dtype=float)
+        if arr.shape != self.action_space.shape:
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {arr.shape}")
+        out = self.core.step(arr.reshape(1, self.config.n_vessels, self.config.action_dim))
+        terminated, truncated = bool(out.terminated[0]), bool(out.truncated[0])
+        self._done = terminated or truncated
+        if self.render_mode == "human":
+            self.render()
+        reward = float(out.reward[0].mean())
+        return out.observation[0].reshape(-1), reward, terminated, truncated, joint_info(out, 0)
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
+            return None
+        if self._renderer is None:
+            from marine_formation_env.render import FormationRenderer
+
+            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
+        return self._renderer.draw(self.core.state[0], float(self.core.time[0]))  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,251 @@
+"""Gymnasium VectorEnv over the batched core: many formations in one call.
+
+``MarineFormationVectorEnv(num_envs=B, ...)`` steps ``B`` formations of the
+scenario at once with :class:`~marine_formation_env.core.FormationCore`. It is
+the ``vector_entry_point`` of ``MarineFormation-v0``::
+
+    envs = gymnasium.make_vec("MarineFormation-v0", num_envs=64, vectorization_mode="vector_entry_point",
+                              action_level="speed", n_vessels=5, topology="ring")
+
+Two layouts of the same simulation:
+
+* ``layout="joint"`` (default): one entry per formation, as the centralized
+  ``gymnasium.make("MarineFormation-v0")`` view: observation ``(N·dim,)`` (the
+  vessels' masked observations concatenated), action ``(N·A,)``, reward the mean
+  of the vessels' rewards. ``num_envs = B``.
+* ``layout="agent"``: one entry per vessel (parameter sharing), entry
+  ``b·N + j`` is vessel ``j`` of formation ``b``; observation ``(dim,)``,
+  action ``(A,)``, reward that vessel's own. ``num_envs = B·N``; a formation's
+  vessels terminate, truncate and reset together.
+
+Formation ``b`` is seeded with ``seed + b`` (``reset(seed=int)``) or
+``seed[b]`` (a list of B seeds), so it reproduces a single
+``parallel_env``/``gymnasium.make`` env reset with that seed, step for step; its
+generator then carries on across autoresets, as a single env's does.
+
+Autoreset follows Gymnasium's modes (``metadata["autoreset_mode"]``):
+``NEXT_STEP`` (default) resets a finished formation on the following ``step``
+call, which ignores that formation's actions and returns its first
+observation with zero reward; ``SAME_STEP`` resets it within the same call and
+puts the last observation in ``infos["final_obs"]`` (mask ``infos["_final_obs"]``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.scenarios import ScenarioConfig, make_config
+
+__all__ = ["LAYOUTS", "MarineFormationVectorEnv", "joint_info"]
+
+LAYOUTS = ("joint", "agent")
+
+
+def joint_info(out: StepOutput, b: int) -> dict[str, Any]:
+    """The info dict of formation ``b`` in the centralized (joint) views."""
+    info: dict[str, Any] = {
+        "vessel_rewards": out.reward[b].astype(np.float64),
+        "reward_components": {key: float(np.mean(value[b])) for key, value in out.components.items()},
+        "collision": bool(out.collision[b]),
+        "out_of_bounds": bool(out.out_of_bounds[b]),
+    }
+    if out.commanded_speed is not None:
+        info["commanded_speed"] = out.commanded_speed[b].astype(np.float64)
+    return info
+
+
+class MarineFormationVectorEnv(VectorEnv):
+    """``num_envs`` formations stepped by one batched core (see the module docstring).
+
+    Args:
+        num_envs: number of formations B.
+        scenario: scenario name; ``**overrides`` as for ``parallel_env``.
+        layout: ``"joint"`` (an entry per formation) or ``"agent"`` (per vessel).
+        autoreset_mode: :class:`gymnasium.vector.AutoresetMode` ``NEXT_STEP``
+            or ``SAME_STEP`` (or their string values).
+        render_mode: ``"rgb_array"`` renders formation 0.
+    """
+
+    metadata: dict[str, Any] = {  # noqa: RUF012 - gymnasium reads it from the class
+        "render_modes": ["rgb_array"],
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str = "paper",
+        layout: str = "joint",
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
+        **overrides: Any,
+    ) -> None:
+        if layout not in LAYOUTS:
+            raise ValueError(f"unknown layout {layout!r}; choose one of {list(LAYOUTS)}")
+        mode = AutoresetMode(autoreset_mode)
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {mode!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.core = FormationCore(self.config, num_envs=num_envs)
+        self.num_formations = self.core.num_envs
+        self.n_vessels = self.config.n_vessels
+        self.layout = layout
+        self.autoreset_mode = mode
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        self.render_mode = render_mode
+        b, n, a = self.num_formations, self.n_vessels, self.config.action_dim
+        agent_obs = self.core.observation_space()
+        agent_act = spaces.Box(-1.0, 1.0, (a,), dtype=np.float32)
+        if layout == "joint":
+            self.num_envs = b
+            self.single_observation_space = spaces.Box(
+                np.tile(agent_obs.low, n), np.tile(agent_obs.high, n), dtype=np.float32
+            )
+            self.single_action_space = spaces.Box(-1.0, 1.0, (n * a,), dtype=np.float32)
+        else:
+            self.num_envs = b * n
+            self.single_observation_space = agent_obs
+            self.single_action_space = agent_act
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._rngs = [seeding.np_random(None)[0] for _ in range(b)]
+        self._needs_reset = np.zeros(b, dtype=bool)
+        self._renderer: Any = None
+        self._started = False
+
+    # ------------------------------------------------------------------ reset
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every formation.
+
+        Args:
+            seed: an int (formation ``b`` gets ``seed + b``) or a list of B seeds.
+            options: ``{"initial_state": (N, 6) or (B, N, 6)}`` sets the states exactly.
+        """
+        b = self.num_formations
+        if seed is not None:
+            seeds = [seed + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
+            if len(seeds) != b:
+                raise ValueError(f"reset(seed=…) needs an int or a list of {b} seeds (one per formation), got {seed!r}")
+            self._rngs = [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
+        initial = (options or {}).get("initial_state")
+        if initial is None:
+            initial = np.stack([self.core.sample_initial_state(rng) for rng in self._rngs])
+        self.core.reset(initial)
+        self._needs_reset[:] = False
+        self._started = True
+        return self._layout_obs(self.core.observe()), {}
+
+    # ------------------------------------------------------------------- step
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every formation once (see the module docstring for autoreset)."""
+        if not self._started:
+            raise RuntimeError("step() called before reset()")
+        b, n, a = self.num_formations, self.n_vessels, self.config.action_dim
+        arr = np.asarray(actions, dtype=float)
+        if arr.shape != self.action_space.shape:
+            raise ValueError(f"actions must have shape {self.action_space.shape}, got {arr.shape}")
+        arr = arr.reshape(b, n, a)
+        pending = self._needs_reset.copy()
+        if pending.any():
+            arr = arr.copy()
+            arr[pending] = 0.0  # ignored: these formations are reset below
+        out = self.core.step(arr)
+        obs = out.observation
+        done = out.terminated | out.truncated
+        infos: dict[str, Any] = {}
+        if pending.any():
+            ids = np.flatnonzero(pending)
+            obs[ids] = self._reset_formations(ids)
+            for field in (out.reward, out.terminated, out.truncated, done, *out.components.values()):
+                field[ids] = 0
+            self._needs_reset[ids] = False
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            ids = np.flatnonzero(done)
+            final_obs = self._layout_obs(obs)
+            obs[ids] = self._reset_formations(ids)
+            infos["final_obs"] = self._entries_of(final_obs, ids)
+            infos["_final_obs"] = self._entry_mask(ids)
+        elif done.any():
+            self._needs_reset |= done
+        reward, terminated, truncated = self._layout_scalars(out.reward, out.terminated, out.truncated)
+        infos.update(self._infos(out))
+        return self._layout_obs(obs), reward, terminated, truncated, infos
+
+    def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
+        initial = np.stack([self.core.sample_initial_state(self._rngs[k]) for k in ids])
+        return self.core.reset(initial, env_ids=ids)
+
+    # ---------------------------------------------------------------- layouts
+    def _layout_obs(self, obs: np.ndarray) -> np.ndarray:
+        if self.layout == "joint":
+            return obs.reshape(self.num_formations, -1)
+        return obs.reshape(self.num_formations * self.n_vessels, -1)
+
+    def _layout_scalars(
+        self, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.layout == "joint":
+            return reward.mean(axis=1), terminated.copy(), truncated.copy()
+        n = self.n_vessels
+        return reward.reshape(-1), np.repeat(terminated, n), np.repeat(truncated, n)
+
+    def _entries_of(self, layout_obs: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        final = np.full(self.num_envs, None, dtype=object)
+        for k in ids:
+            if self.layout == "joint":
+                final[k] = layout_obs[k].copy()
+            else:
+                for j in range(self.n_vessels):
+                    final[k * self.n_vessels + j] = layout_obs[k * self.n_vessels + j].copy()
+        return final
+
+    def _entry_mask(self, ids: np.ndarray) -> np.ndarray:
+        mask = np.zeros(self.num_formations, dtype=bool)
+        mask[ids] = True
+        return mask if self.layout == "joint" else np.repeat(mask, self.n_vessels)
+
+    def _infos(self, out: StepOutput) -> dict[str, Any]:
+        """Vectorized infos: every entry is an array over the entries."""
+        if self.layout == "joint":
+            infos: dict[str, Any] = {
+                "reward_components": {k: v.mean(axis=1) for k, v in out.components.items()},
+                "collision": out.collision.copy(),
+                "out_of_bounds": out.out_of_bounds.copy(),
+            }
+            if out.commanded_speed is not None:
+                infos["commanded_speed"] = out.commanded_speed.copy()
+            return infos
+        n = self.n_vessels
+        infos = {
+            "reward_components": {k: v.reshape(-1) for k, v in out.components.items()},
+            "collision": np.repeat(out.collision, n),
+            "out_of_bounds": np.repeat(out.out_of_bounds, n),
+        }
+        if out.commanded_speed is not None:
+            infos["commanded_speed"] = out.commanded_speed.reshape(-1)
+        return infos
+
+    # --------------------------------------------------------------- extras
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """Render formation 0 (``rgb_array``)."""
+        if self.render_mode is None:
+            return None
+        if self._renderer is None:
+            from marine_formation_env.render import FormationRenderer
+
+            self._renderer = FormationRenderer(self.config)
+        return (self._renderer.draw(self.core.state[0], float(self.core.time[0])),)
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._renderer = None
