@@ -23,7 +23,7 @@ decentralized one cannot.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -44,7 +44,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         render_mode: ``"rgb_array"`` or ``"human"``.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012 - gymnasium API
 
     def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
