@@ -1,14 +1,23 @@
-"""Evaluate policies on a scenario: metrics table, JSON, trajectory and Fig. 6-style plot.
+"""Evaluate policies on a scenario: metrics table, JSON, trajectories and plots.
 
-Example (the paper's scenario with the paper's controller)::
+Examples::
 
+    # the paper's scenario with the paper's controller
     python -m baselines.evaluate --scenario paper --policy reference --episodes 1 --seed 0 \\
         --json results/paper.json --save-trajectory results/paper.npz --plot results/paper.png
+    # a trained model beside the reference, on the same seeds
+    python -m baselines.evaluate --policy reference --policy runs/paper_speed/model.zip --episodes 10 \\
+        --plot results/compare.png
 
-``--set KEY=VALUE`` overrides any scenario field (``--set action_level=force``,
-``--set n_vessels=5 --set topology=ring``, ``--set 'gains={"delta": 80}'``);
-values are Python/JSON literals, anything else is taken as a string.
-Episode ``k`` is reset with seed ``seed + k``, the same for every policy.
+``--policy`` repeats: ``reference``, ``random``, or a model saved by
+``python -m training.train`` (``runs/NAME/model.zip`` or the run folder). A
+model brings its training scenario and env overrides; ``--scenario`` and
+``--set`` take precedence over them. ``--set KEY=VALUE`` overrides any scenario
+field (``--set action_level=force``, ``--set n_vessels=5 --set topology=ring``,
+``--set 'gains={"delta": 80}'``); values are Python/JSON literals, anything
+else is taken as a string. Episode ``k`` is reset with seed ``seed + k``, the
+same for every policy. With several policies, ``--plot`` draws them side by
+side (and each policy's own Fig. 6-style figure beside it).
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ from baselines.metrics import episode_metrics, summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy, Trajectory, run_episode
 from marine_formation_env.env import parallel_env
-from marine_formation_env.scenarios import SCENARIOS
+from marine_formation_env.scenarios import SCENARIOS, ScenarioConfig
 
 __all__ = ["evaluate", "main", "make_policy", "parse_overrides"]
 
@@ -52,13 +61,41 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
     return out
 
 
-def make_policy(spec: str, env: Any, seed: int) -> Any:
-    """Build a policy from its command-line name."""
+def is_model_path(spec: str) -> bool:
+    """Whether a ``--policy`` value names a saved model rather than a built-in policy."""
+    return spec not in BUILTIN_POLICIES and (spec.endswith(".zip") or Path(spec).is_dir())
+
+
+def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
+    """Load a saved model and its run config (needs the ``train`` extra)."""
+    try:
+        from training.learned import load_learned_policy
+    except ImportError as err:
+        raise ImportError(
+            f"evaluating a saved model needs the training extra: pip install 'marine-formation-env[train]' ({err})"
+        ) from err
+    return load_learned_policy(spec)  # type: ignore[no-any-return]
+
+
+def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
+    """Build a policy from its command-line name (or a loaded model)."""
     if spec == "reference":
         return ReferencePolicy(env)
     if spec == "random":
         return RandomPolicy(env, seed=seed)
-    raise ValueError(f"unknown policy {spec!r}; known policies: {list(BUILTIN_POLICIES)}")
+    if loaded is not None and spec in loaded:
+        policy = loaded[spec]
+        obs_dim = env.observation_space(env.possible_agents[0]).shape[0]
+        expected = policy.model.observation_space.shape[0]
+        if expected != obs_dim or policy.model.action_space.shape[0] != env.config.action_dim:
+            raise ValueError(
+                f"model {spec!r} expects observations of size {expected} and actions of size "
+                f"{policy.model.action_space.shape[0]}, but this scenario has {obs_dim} and "
+                f"{env.config.action_dim} (action_level {env.config.action_level!r}, n_vessels "
+                f"{env.config.n_vessels}); evaluate it on the scenario it was trained on"
+            )
+        return policy
+    raise ValueError(f"unknown policy {spec!r}; known policies: {list(BUILTIN_POLICIES)} or a saved model (.zip)")
 
 
 def _progress(total: int, enabled: bool) -> Any:
@@ -72,26 +109,43 @@ def _progress(total: int, enabled: bool) -> Any:
 
 
 def evaluate(
-    scenario: str,
+    scenario: str | None,
     policies: Sequence[str],
     episodes: int,
     seed: int,
     overrides: dict[str, Any],
     progress: bool = True,
-) -> tuple[dict[str, Any], dict[str, Trajectory]]:
+) -> tuple[dict[str, Any], dict[str, Trajectory], ScenarioConfig]:
     """Run every policy for ``episodes`` episodes on the same seeds.
 
+    Args:
+        scenario: scenario name; None takes the first model's (else ``paper``).
+        policies: ``reference``, ``random`` or saved-model paths.
+        overrides: env overrides, applied over the first model's env_kwargs.
+
     Returns:
-        ``(report, first)``: the JSON-friendly report and, per policy, its first
-        episode's trajectory.
+        ``(report, first, config)``: the JSON-friendly report, per policy its
+        first episode's trajectory, and the scenario configuration used.
     """
     if episodes < 1:
         raise ValueError(f"--episodes must be ≥ 1, got {episodes}")
+    if len(set(policies)) != len(policies):
+        raise ValueError(f"each --policy may appear once, got {list(policies)}")
+    loaded: dict[str, Any] = {}
+    trained_on: dict[str, Any] = {}
+    for spec in policies:
+        if is_model_path(spec):
+            loaded[spec], run_config = load_model(spec)
+            if not trained_on:
+                trained_on = {"scenario": run_config["scenario"], **run_config["env_kwargs"]}
+    scenario = scenario or trained_on.pop("scenario", "paper")
+    trained_on.pop("scenario", None)
+    overrides = {**trained_on, **overrides}
     env = parallel_env(scenario, **overrides)
     cfg = env.config
     report: dict[str, Any] = {
         "scenario": scenario,
-        "overrides": {k: repr(v) if not isinstance(v, (int, float, str, bool)) else v for k, v in overrides.items()},
+        "overrides": {k: v if isinstance(v, (int, float, str, bool)) else repr(v) for k, v in overrides.items()},
         "seed": seed,
         "episodes": episodes,
         "config": cfg.to_dict(),
@@ -100,7 +154,7 @@ def evaluate(
     first: dict[str, Trajectory] = {}
     bar = _progress(len(policies) * episodes, progress)
     for label in policies:
-        policy = make_policy(label, env, seed)
+        policy = make_policy(label, env, seed, loaded)
         per_episode = []
         for k in range(episodes):
             traj = run_episode(env, policy, seed=seed + k)
@@ -114,17 +168,19 @@ def evaluate(
     if bar is not None:
         bar.close()
     env.close()
-    return report, first
+    return report, first, cfg
 
 
 TABLE_COLUMNS = (
     ("return", "return", "{:.2f}"),
     ("final_coordination_spread", "spread [m]", "{:.3g}"),
     ("final_cross_track_max", "|e| [m]", "{:.3g}"),
-    ("final_heading_max_deg", "|ψ| [deg]", "{:.3g}"),
+    ("rms_cross_track", "rms e [m]", "{:.3g}"),
     ("final_speed_error_max", "|u−u_d| [m/s]", "{:.3g}"),
     ("settling_time", "settling [s]", "{:.1f}"),
     ("time_outside_speed_band", "outside band [s]", "{:.1f}"),
+    ("effort", "effort", "{:.3g}"),
+    ("success", "success", "{:.0%}"),
 )
 
 
@@ -138,6 +194,10 @@ def format_table(report: dict[str, Any]) -> str:
             stats = result["summary"].get(key)
             if stats is None:
                 row.append("never" if key == "settling_time" else "n/a")
+            elif key == "success" or stats["count"] == 1:
+                row.append(fmt.format(stats["mean"]))
+            elif stats["count"] < len(result["episodes"]):
+                row.append(f"{fmt.format(stats['mean'])} ± {fmt.format(stats['std'])} ({stats['count']} ep.)")
             elif stats["count"] > 1:
                 row.append(f"{fmt.format(stats['mean'])} ± {fmt.format(stats['std'])}")
             else:
@@ -151,9 +211,14 @@ def format_table(report: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m baselines.evaluate", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenario", default="paper", help=f"scenario name ({', '.join(sorted(SCENARIOS))})")
     parser.add_argument(
-        "--policy", action="append", dest="policies", help=f"policy to run; repeatable ({', '.join(BUILTIN_POLICIES)})"
+        "--scenario", default=None, help=f"scenario ({', '.join(sorted(SCENARIOS))}); default: a model's, else paper"
+    )
+    parser.add_argument(
+        "--policy",
+        action="append",
+        dest="policies",
+        help=f"policy to run; repeatable ({', '.join(BUILTIN_POLICIES)}, or a saved model .zip / run folder)",
     )
     parser.add_argument("--episodes", type=int, default=1, help="episodes per policy (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
@@ -166,8 +231,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     policies = args.policies or ["reference"]
     try:
         overrides = parse_overrides(args.set)
-        report, first = evaluate(args.scenario, policies, args.episodes, args.seed, overrides, not args.quiet)
-    except (ValueError, KeyError, TypeError) as err:
+        report, first, cfg = evaluate(args.scenario, policies, args.episodes, args.seed, overrides, not args.quiet)
+    except (ValueError, KeyError, TypeError, FileNotFoundError, ImportError) as err:
         parser.error(str(err))
     if not args.quiet:
         print(format_table(report))
@@ -182,17 +247,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         arrays["formation"] = np.asarray(_config_of(report)["formation"])
         np.savez_compressed(args.save_trajectory, **arrays)  # type: ignore[arg-type]
     if args.plot:
-        from baselines.plots import plot_episode
+        from baselines.plots import plot_comparison, plot_episode
 
-        env = parallel_env(args.scenario, **overrides)
-        for k, (label, traj) in enumerate(first.items()):
-            path = args.plot if k == 0 else args.plot.with_name(f"{args.plot.stem}_{label}{args.plot.suffix}")
+        if len(first) == 1:
+            (label, traj), *_ = first.items()
             plot_episode(
                 traj,
-                env.config,
-                path,
-                title=f"{args.scenario}: policy {label!r}, seed {args.seed}, action level {env.config.action_level!r}",
+                cfg,
+                args.plot,
+                title=f"{report['scenario']}: policy {label!r}, seed {args.seed}, action level {cfg.action_level!r}",
             )
+        else:
+            plot_comparison(first, cfg, args.plot, title=f"{report['scenario']} ({cfg.action_level}), seed {args.seed}")
+            for k, (label, traj) in enumerate(first.items()):
+                name = Path(label).parent.name if is_model_path(label) else label
+                path = args.plot.with_name(f"{args.plot.stem}_{k}_{name}{args.plot.suffix}")
+                plot_episode(traj, cfg, path, title=f"{report['scenario']}: policy {label!r}, seed {args.seed}")
     return 0
 
 

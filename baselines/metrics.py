@@ -10,7 +10,11 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
 * time outside the band: control periods with some u_cj ∉ (U_min, U_max), in s;
 * effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
-* return: per-vessel sum of rewards, averaged over vessels.
+* return: per-vessel sum of rewards, averaged over vessels;
+* success: the episode ran to its time limit (no collision, no exit from the
+  workspace or envelope) and at its end every error is inside
+  :data:`SUCCESS_BANDS`: max |e_j| ≤ 1 m, max |ψ_j| ≤ 2°, spread ≤ 1 m,
+  max |u_j − u_d| ≤ 0.1 m/s.
 """
 
 from __future__ import annotations
@@ -23,10 +27,12 @@ from baselines.rollout import Trajectory
 from marine_formation_env.dynamics import wrap_angle
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["SETTLING_BANDS", "episode_metrics", "settling_time", "summarize"]
+__all__ = ["SETTLING_BANDS", "SUCCESS_BANDS", "episode_metrics", "settling_time", "summarize"]
 
 #: Tolerances that define "settled": cross-track [m], heading [deg], spread [m], speed [m/s].
 SETTLING_BANDS = {"cross_track": 0.5, "heading_deg": 0.5, "spread": 0.5, "speed": 0.05}
+#: Final-time tolerances of a successful episode (same units).
+SUCCESS_BANDS = {"cross_track": 1.0, "heading_deg": 2.0, "spread": 1.0, "speed": 0.1}
 
 
 def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
@@ -67,6 +73,9 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
     i, j = np.triu_indices(cfg.n_vessels, k=1)
     separation = np.hypot(traj.state[:, i, 0] - traj.state[:, j, 0], traj.state[:, i, 1] - traj.state[:, j, 1])
     settle = settling_time(traj, cfg)
+    success = not traj.terminated and all(
+        float(np.max(np.abs(err[key][-1]))) <= tol for key, tol in SUCCESS_BANDS.items()
+    )
     return {
         "episode_time": float(traj.t[-1]),
         "steps": len(traj.t) - 1,
@@ -88,6 +97,7 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
         "min_separation": float(separation.min()),
         "terminated": traj.terminated,
         "collision": traj.collision,
+        "success": success,
     }
 
 

@@ -131,3 +131,56 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path)
     return fig
+
+
+def plot_comparison(
+    trajectories: dict[str, Trajectory], cfg: ScenarioConfig, path: str | Path | None = None, title: str = ""
+) -> Any:
+    """Policies side by side (one column each, shared y-axes per row) on the same episode.
+
+    Rows: paths in the plane, cross-track errors, along-track coordination
+    errors relative to the formation mean, surge and commanded speeds.
+    """
+    require_matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    labels = list(trajectories)
+    cols = len(labels)
+    fig = Figure(figsize=(4.6 * cols, 11.0), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(4, cols, squeeze=False, sharey="row")
+    offsets = cfg.formation
+    for c, label in enumerate(labels):
+        traj = trajectories[label]
+        t, s = traj.t, traj.state
+        theta = s[..., 0] - offsets[:, 0]
+        for j in range(cfg.n_vessels):
+            color = vessel_color(j)
+            axes[0, c].axhline(offsets[j, 1], color=color, ls="--", lw=0.7, alpha=0.6)
+            axes[0, c].plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.1)
+            axes[1, c].plot(t, s[:, j, 1] - offsets[j, 1], color=color, lw=1.1)
+            axes[2, c].plot(t, theta[:, j] - theta.mean(axis=1), color=color, lw=1.1)
+            axes[3, c].plot(t, s[:, j, 3], color=color, lw=1.1)
+            if np.any(np.isfinite(traj.commanded_speed[:, j])):
+                axes[3, c].step(t[:-1], traj.commanded_speed[:, j], where="post", color=color, lw=0.7, ls=":")
+        axes[3, c].plot(t, traj.u_d, color="k", ls="--", lw=0.8)
+        for bound in (cfg.u_min, cfg.u_max):
+            axes[3, c].axhline(bound, color="0.5", lw=0.8, ls="-.")
+        name = Path(label).parent.name + "/" + Path(label).name if label.endswith(".zip") else label
+        end = "terminated" if traj.terminated else f"return {traj.rewards.sum(axis=0).mean():.1f}"
+        axes[0, c].set_title(f"{name}\n({end})", fontsize=9)
+        axes[3, c].set_xlabel("t [s]")
+        axes[0, c].set_xlabel("x [m]")
+        for r in range(4):
+            axes[r, c].grid(alpha=0.3)
+    axes[0, 0].set_ylabel("y [m]")
+    axes[1, 0].set_ylabel("y_j − D_yj [m]")
+    axes[2, 0].set_ylabel("θ_j − mean θ [m]")
+    axes[3, 0].set_ylabel("u_j, u_cj (dotted) [m/s]")
+    fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
+    fig.tight_layout()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path)
+    return fig

@@ -297,7 +297,9 @@ class FormationCore:
     def _closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
         """The vector field ``rhs(t, state)`` of the vessels over one control period.
 
-        ``force`` inputs and the ``guidance`` heading ψ_d are held. The commanded
+        The inner loops' inputs are saturated at ±tau_u_max, ±tau_r_max, the
+        actuator limits of the ``force`` level. ``force`` inputs and the
+        ``guidance`` heading ψ_d are held. The commanded
         speed u_c (``speed``, ``guidance``) is ramped from the previous period's
         to the new one (first-order hold) and (11) receives the ramp's slope as
         ``u̇_c``; the first command after a reset is held (zero slope).
@@ -307,6 +309,7 @@ class FormationCore:
         if cfg.action_level == "force":
             tau_u, tau_r = commands["tau_u"], commands["tau_r"]
             return lambda _t, s: vessel_rhs(p, s, tau_u, tau_r)
+        clip, tu_max, tr_max = np.clip, cfg.tau_u_max, cfg.tau_r_max  # actuator limits apply at every level
         u_c0 = self._last_u_c
         u_c_dot = (commands["u_c"] - u_c0) / cfg.dt
         if cfg.action_level == "guidance":
@@ -318,7 +321,7 @@ class FormationCore:
                 tau_u, tau_r = heading_tracking_inputs(
                     p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d, printed, acc, u_c_dot
                 )
-                return vessel_rhs(p, s, tau_u, tau_r, acc)
+                return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc)
 
             return rhs_guidance
         dy = self._dy
@@ -329,7 +332,7 @@ class FormationCore:
             tau_u, tau_r = path_following_inputs(
                 p, gains, s[..., Y] - dy, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
             )
-            return vessel_rhs(p, s, tau_u, tau_r, acc)
+            return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc)
 
         return rhs_speed
 

@@ -47,7 +47,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     needs: a held u_c would make u lag it by 1/(k_u + d11/m11) ≈ 2 s, and that
     lag destabilizes the consensus on one-way rings of four or more vessels.
     The ramp stays inside [U_min, U_max]; a command that jumps by Δ asks for a
-    surge acceleration of about Δ/dt.
+    surge acceleration of about Δ/dt. At every level the vessel has the same
+    actuators: the built-in loops' τ_u, τ_r saturate at ±tau_u_max, ±tau_r_max.
 
     | level      | index | meaning                      | unit   | a = −1        | a = +1       |
     |------------|-------|------------------------------|--------|---------------|--------------|

@@ -231,7 +231,8 @@ class ScenarioConfig:
         safety_distance: two vessels closer than this [m] collide (terminates).
         workspace: ``(x_min, x_max, y_min, y_max)`` [m]; None derives a box that
             holds the whole nominal run with margins of 500 m (x) and 250 m (y).
-        tau_u_max, tau_r_max: ``force``-level input ranges [m/s², rad/s²].
+        tau_u_max, tau_r_max: actuator limits [m/s², rad/s²]: the ``force``-level
+            action range, and the saturation of the built-in loops at the other levels.
         psi_max: ``guidance``-level heading command range ±psi_max [rad].
         max_speed: envelope of |u| and |v| [m/s]; beyond it the formation
             terminates (the model is not meant for it). Must exceed u_max.

@@ -1,0 +1,105 @@
+"""Learned policies with the same interface as the reference policy.
+
+:class:`ModelPolicy` wraps an SB3 model (and the observation normalization it
+was trained with) as a policy over PettingZoo observation dicts: every vessel
+acts from its own masked observation with the shared network.
+:func:`load_learned_policy` loads one from a run folder written by
+``python -m training.train`` (``model.zip``, ``vecnormalize.pkl``,
+``config.yaml``).
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from marine_formation_env import ENV_ID
+from training.config import algo_class
+
+__all__ = ["ModelPolicy", "load_learned_policy", "run_folder_of"]
+
+
+class ModelPolicy:
+    """A shared SB3 policy acting for every vessel.
+
+    Args:
+        model: an SB3 model whose observation is one vessel's observation.
+        normalizer: a ``VecNormalize`` (or None) whose ``normalize_obs`` is applied first.
+        deterministic: act with the distribution's mode (default) or sample.
+    """
+
+    def __init__(self, model: Any, normalizer: Any = None, deterministic: bool = True) -> None:
+        self.model = model
+        self.normalizer = normalizer
+        self.deterministic = deterministic
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(..., A)`` for observations ``(..., dim)``."""
+        flat = np.asarray(obs, dtype=np.float32).reshape(-1, obs.shape[-1])
+        if self.normalizer is not None:
+            flat = self.normalizer.normalize_obs(flat)
+        actions, _ = self.model.predict(flat, deterministic=self.deterministic)
+        return np.asarray(actions, dtype=np.float32).reshape(*obs.shape[:-1], -1)
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        agents = list(observations)
+        if not agents:
+            return {}
+        actions = self.act_batch(np.stack([observations[a] for a in agents]))
+        return {agent: actions[k] for k, agent in enumerate(agents)}
+
+
+def run_folder_of(path: str | Path) -> Path:
+    """The run folder of a model path (``runs/NAME/model.zip``) or of a folder (``runs/NAME``)."""
+    path = Path(path)
+    return path if path.is_dir() else path.parent
+
+
+def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[ModelPolicy, dict[str, Any]]:
+    """Load a trained policy and the resolved config of its run.
+
+    Args:
+        path: ``runs/NAME/model.zip`` (or any checkpoint ``.zip`` in a run
+            folder) or the run folder itself.
+
+    Returns:
+        ``(policy, config)`` where ``config`` is the run's resolved training
+        config (``scenario`` and ``env_kwargs`` say what it was trained on).
+    """
+    path = Path(path)
+    model_path = path / "model.zip" if path.is_dir() else path
+    folder = run_folder_of(path)
+    if not model_path.is_file():
+        raise FileNotFoundError(f"no model at {str(model_path)!r}")
+    config_path = folder / "config.yaml"
+    if not config_path.is_file():
+        config_path = folder.parent / "config.yaml"  # a checkpoint in runs/NAME/checkpoints/
+    if not config_path.is_file():
+        raise FileNotFoundError(f"no config.yaml beside {str(model_path)!r}: was it written by training.train?")
+    config = yaml.safe_load(config_path.read_text())[ENV_ID]
+    model = algo_class(config["algo"]).load(model_path, device="cpu")
+    normalizer = None
+    stats = _vecnormalize_path(model_path)
+    if stats is not None:
+        with open(stats, "rb") as handle:
+            normalizer = pickle.load(handle)
+        normalizer.training = False
+    return ModelPolicy(model, normalizer, deterministic), config
+
+
+def _vecnormalize_path(model_path: Path) -> Path | None:
+    """``vecnormalize.pkl`` beside ``model.zip``, or the checkpoint's own statistics."""
+    if model_path.name == "model.zip" or model_path.name == "best_model.zip":
+        candidate = model_path.with_name(model_path.stem.replace("model", "vecnormalize") + ".pkl")
+        return candidate if candidate.is_file() else None
+    # CheckpointCallback names: model_<N>_steps.zip and model_vecnormalize_<N>_steps.pkl
+    stem = model_path.stem
+    if stem.startswith("model_") and stem.endswith("_steps"):
+        candidate = model_path.with_name(f"model_vecnormalize_{stem[len('model_') :]}.pkl")
+        return candidate if candidate.is_file() else None
+    return None

@@ -1,0 +1,125 @@
+"""Parameter sharing for Stable-Baselines3 without SuperSuit.
+
+:class:`SharedPolicyVecEnv` is an SB3 ``VecEnv`` in which every vessel of
+every formation copy is one entry, so a single PPO/SAC policy drives all the
+vessels, each from its own masked observation. It is a thin adapter over the
+batched :class:`marine_formation_env.vector.MarineFormationVectorEnv` in its
+``agent`` layout with ``SAME_STEP`` autoreset: one batched physics path.
+
+Entry ``b·N + j`` is vessel ``j`` of formation ``b``. A formation's vessels
+finish together; their infos then carry ``terminal_observation`` (SB3's
+convention) and ``TimeLimit.truncated``, and the returned observations are
+already those of the next episode. ``seed(s)`` makes formation ``b`` start from
+``s + b`` at the next ``reset()``, exactly as ``parallel_env(...).reset(seed=s + b)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+
+from marine_formation_env.vector import MarineFormationVectorEnv
+
+__all__ = ["SharedPolicyVecEnv"]
+
+
+class SharedPolicyVecEnv(VecEnv):
+    """``n_formations`` formations, one SB3 env entry per vessel (see the module docstring).
+
+    Args:
+        n_formations: number of formation copies B.
+        scenario: scenario name; ``**overrides`` as for ``parallel_env``.
+    """
+
+    def __init__(self, n_formations: int = 1, scenario: str = "paper", **overrides: Any) -> None:
+        self.venv = MarineFormationVectorEnv(
+            num_envs=n_formations,
+            scenario=scenario,
+            layout="agent",
+            autoreset_mode=AutoresetMode.SAME_STEP,
+            **overrides,
+        )
+        self.config = self.venv.config
+        self.n_formations = n_formations
+        self.n_vessels = self.config.n_vessels
+        self.render_mode = None
+        self._actions: np.ndarray | None = None
+        self._formation_seed: int | None = None
+        super().__init__(self.venv.num_envs, self.venv.single_observation_space, self.venv.single_action_space)
+
+    # -------------------------------------------------------------- stepping
+    def reset(self) -> np.ndarray:
+        obs, _ = self.venv.reset(seed=self._formation_seed)
+        self._formation_seed = None
+        self._reset_seeds()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions, dtype=np.float32).reshape(self.num_envs, -1)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        obs, reward, terminated, truncated, infos = self.venv.step(self._actions)
+        self._actions = None
+        dones = terminated | truncated
+        final = infos.get("final_obs")
+        components = infos["reward_components"]
+        entry_infos: list[dict[str, Any]] = []
+        for k in range(self.num_envs):
+            info: dict[str, Any] = {"reward_components": {name: float(v[k]) for name, v in components.items()}}
+            if dones[k]:
+                info["terminal_observation"] = final[k] if final is not None else obs[k]
+                info["TimeLimit.truncated"] = bool(truncated[k] and not terminated[k])
+            entry_infos.append(info)
+        return obs, reward.astype(np.float32), dones, entry_infos
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        """Seed the next reset: formation ``b`` starts from ``seed + b`` (all its vessels share it)."""
+        if seed is None:
+            seed = int(np.random.default_rng().integers(0, 2**31 - 1))
+        self._formation_seed = int(seed)
+        return [seed + k // self.n_vessels for k in range(self.num_envs)]
+
+    def close(self) -> None:
+        self.venv.close()
+
+    # ------------------------------------------------------------ attributes
+    def _count(self, indices: VecEnvIndices) -> int:
+        return len(list(self._get_indices(indices)))
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        """The attribute of the shared simulation, once per requested entry."""
+        if attr_name == "render_mode":
+            return [self.render_mode] * self._count(indices)
+        return [getattr(self.venv, attr_name)] * self._count(indices)
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set an attribute of the shared simulation (all entries share it)."""
+        setattr(self.venv, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        """Call a method of the shared simulation once; its result is returned for each requested entry."""
+        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
+        return [result] * self._count(indices)
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * self._count(indices)
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None] * self.num_envs
+
+    def _get_indices(self, indices: VecEnvIndices) -> Iterable[int]:
+        if indices is None:
+            return range(self.num_envs)
+        if isinstance(indices, int):
+            return [indices]
+        return indices
