@@ -506,7 +506,9 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
 
     Overriding ``n_vessels`` away from the scenario's value without giving
     ``formation`` / ``initial_state`` switches to a generated ``v`` formation
-    and random initial states around its slots (:data:`GENERATED_INIT_NOISE`).
+    and random initial states around its slots (:data:`GENERATED_INIT_NOISE`),
+    with the default collision check (the ``paper`` scenario turns it off for
+    its own initial state only).
 
     Raises:
         ConfigError: unknown scenario or key, or any invalid value.
@@ -524,6 +526,7 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
             base["formation"] = "v"
         if "initial_state" not in overrides:
             base["initial_state"] = None
+            base.pop("safety_distance", None)  # the scenario's value belongs to its own initial state
             base.setdefault("init_noise", GENERATED_INIT_NOISE)
             if isinstance(base["init_noise"], InitNoise) and base["init_noise"].is_zero:
                 base["init_noise"] = GENERATED_INIT_NOISE

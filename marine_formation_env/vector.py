@@ -134,10 +134,10 @@ class MarineFormationVectorEnv(VectorEnv):
         """
         b = self.num_formations
         if seed is not None:
-            seeds = [seed + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
+            seeds = [int(seed) + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
             if len(seeds) != b:
                 raise ValueError(f"reset(seed=…) needs an int or a list of {b} seeds (one per formation), got {seed!r}")
-            self._rngs = [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
+            self._rngs = [seeding.np_random(int(s))[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
         initial = (options or {}).get("initial_state")
         if initial is None:
             initial = np.stack([self.core.sample_initial_state(rng) for rng in self._rngs])
@@ -172,10 +172,9 @@ class MarineFormationVectorEnv(VectorEnv):
             self._needs_reset[ids] = False
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             ids = np.flatnonzero(done)
-            final_obs = self._layout_obs(obs)
-            obs[ids] = self._reset_formations(ids)
-            infos["final_obs"] = self._entries_of(final_obs, ids)
+            infos["final_obs"] = self._entries_of(self._layout_obs(obs), ids)  # copies, before the reset
             infos["_final_obs"] = self._entry_mask(ids)
+            obs[ids] = self._reset_formations(ids)
         elif done.any():
             self._needs_reset |= done
         reward, terminated, truncated = self._layout_scalars(out.reward, out.terminated, out.truncated)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import copy
 import inspect
+import re
 from pathlib import Path
 from typing import Any
 
@@ -73,12 +74,30 @@ def algo_class(name: str) -> Any:
     return getattr(sb3, name.upper())
 
 
+class _Loader(yaml.SafeLoader):
+    """YAML loader that reads ``3e6`` and ``3.0e6`` as floats (YAML 1.2), not as strings (YAML 1.1)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
 def load_config(path: str | Path) -> dict[str, Any]:
     """Read a config file and return its (unvalidated) mapping for ``MarineFormation-v0``."""
     path = Path(path)
     if not path.is_file():
         raise TrainConfigError(f"config file {str(path)!r} does not exist")
-    data = yaml.safe_load(path.read_text())
+    data = yaml.load(path.read_text(), Loader=_Loader)
     if not isinstance(data, dict) or list(data) != [ENV_ID] or not isinstance(data[ENV_ID], dict):
         keys = list(data) if isinstance(data, dict) else type(data).__name__
         raise TrainConfigError(f"{path}: expected one mapping under {ENV_ID!r}, found {keys}")

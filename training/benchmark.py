@@ -1,0 +1,147 @@
+"""Learning benchmark: how close does a learned policy get to the paper's controller in N minutes?
+
+Example::
+
+    python -m training.benchmark --level speed --minutes 15
+
+Trains PPO (``training/configs/paper_<level>_ppo.yaml``: the paper's scenario
+with randomized initial states) until the wall-clock budget is spent, then
+runs the learned policy, the reference policy and a uniform random policy on
+the same ``--episodes`` evaluation seeds and reports:
+
+* mean ± std of the episode return (≤ 0; 0 is perfect) for each policy;
+* ``performance = R_reference / R_learned``: the fraction of the reference's
+  performance the learned policy reaches (1 = parity, 0.9 = it accumulates
+  1/0.9 ≈ 1.11 times the reference's cost; the target is ≥ 0.9);
+* ``normalized = (R_learned − R_random) / (R_reference − R_random)``: 0 is
+  random, 1 is the reference;
+* learned/reference ratio of the final coordination spread, with both values
+  (the reference's spread is ~1e-12 m, so the ratio is large for any policy
+  that is not exactly consensus);
+* success rates (``baselines.metrics.SUCCESS_BANDS``), the wall time and the
+  vessel-steps used.
+
+Results go to ``<out>/benchmark.json``; the run folder holds the model, so
+``python -m baselines.evaluate --policy reference --policy <out>/model.zip``
+reproduces the comparison.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from baselines.metrics import summarize
+from baselines.reference import ReferencePolicy
+from baselines.rollout import RandomPolicy
+from marine_formation_env import ACTION_LEVELS, ENV_ID
+from marine_formation_env.env import parallel_env
+from training.callbacks import EVAL_SEED, WallClockBudget, evaluate_policy_episodes
+from training.config import apply_overrides, load_config, validate
+from training.learned import ModelPolicy
+from training.train import train
+
+__all__ = ["main", "run_benchmark"]
+
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+
+
+def run_benchmark(
+    level: str,
+    minutes: float,
+    seed: int,
+    episodes: int,
+    out: Path,
+    config_path: Path | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Train for ``minutes`` of wall time at ``level`` and compare with the reference (module docstring)."""
+    if level not in ACTION_LEVELS:
+        raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
+    path = config_path or CONFIG_DIR / f"paper_{level}_ppo.yaml"
+    # The budget stops training; the step count is only a ceiling. No periodic evaluation:
+    # its time would count against the budget.
+    resolved = validate(apply_overrides(load_config(path), {"n_timesteps": 10**9, "eval_freq": 0}))
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump({ENV_ID: {**resolved, "seed": seed}}, sort_keys=False))
+    start = time.perf_counter()
+    model = train(resolved, out, seed, progress=progress, extra_callbacks=[WallClockBudget(60.0 * minutes)])
+    wall = time.perf_counter() - start
+    env = parallel_env(resolved["scenario"], **resolved["env_kwargs"])
+    policies = {
+        "learned": ModelPolicy(model, model.get_vec_normalize_env()),
+        "reference": ReferencePolicy(env),
+        "random": RandomPolicy(env, seed=seed),
+    }
+    summaries = {name: summarize(evaluate_policy_episodes(env, p, episodes, EVAL_SEED)) for name, p in policies.items()}
+    r = {name: s["return"]["mean"] for name, s in summaries.items()}
+    spread = {name: s["final_coordination_spread"]["mean"] for name, s in summaries.items()}
+    report = {
+        "level": level,
+        "config": str(path),
+        "minutes_budget": minutes,
+        "wall_time_s": wall,
+        "vessel_steps": int(model.num_timesteps),
+        "episodes": episodes,
+        "eval_seeds": [EVAL_SEED + k for k in range(episodes)],
+        "returns": {name: {"mean": s["return"]["mean"], "std": s["return"]["std"]} for name, s in summaries.items()},
+        "performance": r["reference"] / r["learned"] if r["learned"] else float("nan"),
+        "normalized": (r["learned"] - r["random"]) / (r["reference"] - r["random"]),
+        "return_ratio_learned_over_reference": r["learned"] / r["reference"],
+        "final_spread": spread,
+        "final_spread_ratio_learned_over_reference": spread["learned"] / spread["reference"]
+        if spread["reference"]
+        else float("inf"),
+        "success": {name: s["success"]["mean"] for name, s in summaries.items()},
+        "target_met": bool(r["reference"] / r["learned"] >= 0.9) if r["learned"] else False,
+    }
+    (out / "benchmark.json").write_text(json.dumps(report, indent=2))
+    return report
+
+
+def format_report(report: dict[str, Any]) -> str:
+    lines = [
+        f"level {report['level']}: {report['vessel_steps']:,} vessel-steps in {report['wall_time_s'] / 60:.1f} min",
+        f"{'policy':<10} {'return':>18} {'final spread [m]':>18} {'success':>8}",
+    ]
+    for name in ("learned", "reference", "random"):
+        ret = report["returns"][name]
+        lines.append(
+            f"{name:<10} {ret['mean']:>9.2f} ± {ret['std']:<6.2f} {report['final_spread'][name]:>18.3g} "
+            f"{report['success'][name]:>8.0%}"
+        )
+    lines.append(
+        f"performance R_ref/R_learned = {report['performance']:.3f} (target ≥ 0.9: "
+        f"{'met' if report['target_met'] else 'not met'}); normalized score = {report['normalized']:.3f}; "
+        f"spread ratio learned/reference = {report['final_spread_ratio_learned_over_reference']:.3g}"
+    )
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m training.benchmark", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--level", choices=list(ACTION_LEVELS), default="speed")
+    parser.add_argument("--minutes", type=float, default=15.0, help="wall-clock training budget (default 15)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=10, help="evaluation episodes per policy (default 10)")
+    parser.add_argument("--config", type=Path, help="training config (default training/configs/paper_<level>_ppo.yaml)")
+    parser.add_argument("--out", type=Path, help="run folder (default runs/benchmark_<level>)")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    if args.minutes <= 0 or args.episodes < 1:
+        parser.error(f"--minutes must be > 0 and --episodes ≥ 1, got {args.minutes} and {args.episodes}")
+    out = args.out or Path("runs") / f"benchmark_{args.level}"
+    report = run_benchmark(args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet)
+    print(format_report(report))
+    print(f"written {out / 'benchmark.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
