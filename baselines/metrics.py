@@ -101,9 +101,9 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
     }
 
 
-def summarize(episodes: list[dict[str, Any]]) -> dict[str, dict[str, float | None]]:
+def summarize(episodes: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     """Mean and std over episodes of every numeric metric (None-valued entries skipped)."""
-    out: dict[str, dict[str, float | None]] = {}
+    out: dict[str, dict[str, float]] = {}
     for key in episodes[0]:
         values = [e[key] for e in episodes if isinstance(e[key], (int, float)) and not isinstance(e[key], bool)]
         flags = [e[key] for e in episodes if isinstance(e[key], bool)]

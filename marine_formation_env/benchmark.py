@@ -1,0 +1,341 @@
+"""Throughput benchmark against MPE2 and VMAS, measured in one run on one machine.
+
+Example::
+
+    python -m marine_formation_env.benchmark                 # table on stdout, JSON in results/
+    python -m marine_formation_env.benchmark --quick         # fewer repeats and sizes, for a smoke check
+
+Cases (random actions, 3 agents, ``force`` level, default scenario settings):
+
+* ``parallel``: our PettingZoo ParallelEnv (one formation) vs MPE2
+  ``simple_spread_v3.parallel_env(N=3, continuous_actions=True)``: steps/s,
+  dict in, dicts out, resetting when an episode ends.
+* ``batched``: our :class:`~marine_formation_env.vector.MarineFormationVectorEnv`
+  (the batched core, with autoreset) at B = 1, 64, 1024, 8192 formations vs
+  VMAS ``simple_spread`` on the CPU (``n_agents=3``, continuous actions) at the
+  same B: env-steps/s (formation-steps: B per call).
+* peak memory (max RSS of the process that ran the case);
+* the arithmetic cost of one vessel-step, counted by running the step on arrays
+  that count every elementwise numpy operation (ufunc calls times elements),
+  and the fraction of this machine's elementwise throughput (measured here with
+  a fused multiply-add kernel on in-cache arrays) that the batched core reaches.
+
+Each case runs in its own subprocess (so that memory peaks and imports do not
+mix), each timing is the median of ``--repeats`` repeats, and actions are drawn
+before timing starts. Peers that cannot be imported are reported as such; the
+``bench`` extra installs them (``pip install 'marine-formation-env[bench]'``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["count_vessel_step_ops", "main", "run_case"]
+
+BATCH_SIZES = (1, 64, 1024, 8192)
+ACTION_POOL = 64  # pre-drawn random actions, cycled
+
+
+def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -> dict[str, float]:
+    """Median steps/s of ``repeats`` runs of at least ``min_seconds`` each (after a warm-up)."""
+    for k in range(20):
+        step(k)
+    rates = []
+    for _ in range(repeats):
+        count, start = 0, time.perf_counter()
+        while True:
+            for _ in range(50):
+                step(count)
+                count += 1
+            elapsed = time.perf_counter() - start
+            if elapsed >= min_seconds:
+                break
+        rates.append(count / elapsed)
+    return {"steps_per_s": float(np.median(rates)), "repeats": rates}
+
+
+# ------------------------------------------------------------------ our cases
+def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
+    from marine_formation_env.env import parallel_env
+
+    env = parallel_env("paper", action_level="force")
+    rng = np.random.default_rng(0)
+    pool = [{a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents} for _ in range(ACTION_POOL)]
+    env.reset(seed=0)
+
+    def step(k: int) -> None:
+        env.step(pool[k % ACTION_POOL])
+        if not env.agents:
+            env.reset()
+
+    return _time_steps(step, min_seconds, repeats)
+
+
+def _ours_batched(b: int, min_seconds: float, repeats: int) -> dict[str, float]:
+    from marine_formation_env.vector import MarineFormationVectorEnv
+
+    env = MarineFormationVectorEnv(num_envs=b, scenario="paper", action_level="force")
+    rng = np.random.default_rng(0)
+    pool = [rng.uniform(-1, 1, env.action_space.shape).astype(np.float32) for _ in range(8)]
+    env.reset(seed=0)
+
+    def step(k: int) -> None:
+        env.step(pool[k % len(pool)])
+
+    out = _time_steps(step, min_seconds, repeats)
+    out["env_steps_per_s"] = out["steps_per_s"] * b
+    return out
+
+
+# ------------------------------------------------------------------- peers
+def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
+    from mpe2 import simple_spread_v3
+
+    env = simple_spread_v3.parallel_env(N=3, continuous_actions=True)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    pool = [
+        {a: rng.uniform(0, 1, env.action_space(a).shape).astype(np.float32) for a in env.possible_agents}
+        for _ in range(ACTION_POOL)
+    ]
+
+    def step(k: int) -> None:
+        env.step(pool[k % ACTION_POOL])
+        if not env.agents:
+            env.reset()
+
+    return _time_steps(step, min_seconds, repeats)
+
+
+def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, float]:
+    import torch
+    import vmas
+
+    torch.manual_seed(0)
+    env = vmas.make_env("simple_spread", num_envs=b, device="cpu", continuous_actions=True, n_agents=3, seed=0)
+    env.reset()
+    pool = [[torch.rand(b, 2) * 2.0 - 1.0 for _ in range(3)] for _ in range(8)]
+
+    def step(k: int) -> None:
+        env.step(pool[k % len(pool)])
+
+    out = _time_steps(step, min_seconds, repeats)
+    out["env_steps_per_s"] = out["steps_per_s"] * b
+    return out
+
+
+def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
+    """Run one case in this process and return its measurements (and max RSS)."""
+    try:
+        if case == "ours_parallel":
+            out: dict[str, Any] = _ours_parallel(min_seconds, repeats)
+        elif case == "mpe2_parallel":
+            out = _mpe2_parallel(min_seconds, repeats)
+        elif case == "ours_batched":
+            out = _ours_batched(b, min_seconds, repeats)
+        elif case == "vmas_batched":
+            out = _vmas_batched(b, min_seconds, repeats)
+        else:
+            raise ValueError(f"unknown case {case!r}")
+    except ImportError as err:
+        return {"unavailable": f"{type(err).__name__}: {err}"}
+    out["max_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return out
+
+
+# ------------------------------------------------------------- arithmetic
+class _Counter(np.ndarray):
+    """An ndarray that counts elementwise operations (ufunc calls × output elements)."""
+
+    ops: dict[str, int] = {}  # noqa: RUF012 - a tally shared by all instances during one count
+
+    def __array_ufunc__(self, ufunc: Any, method: str, *inputs: Any, **kwargs: Any) -> Any:
+        args = [np.asarray(x) if isinstance(x, _Counter) else x for x in inputs]
+        if "out" in kwargs:
+            kwargs["out"] = tuple(np.asarray(o) if isinstance(o, _Counter) else o for o in kwargs["out"])
+        result = getattr(ufunc, method)(*args, **kwargs)
+        size = int(np.size(result[0] if isinstance(result, tuple) else result))
+        _Counter.ops[ufunc.__name__] = _Counter.ops.get(ufunc.__name__, 0) + size
+        if isinstance(result, np.ndarray) and method == "__call__":
+            return result.view(_Counter)
+        return result
+
+
+def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
+    """Elementwise numpy operations per vessel-step of the core's integration (dynamics + inner loops).
+
+    Counts the RK4 substeps of one control period (every stage evaluates the
+    vessel ODE and, below the ``force`` level, the inner controllers), for
+    one formation of three vessels, divided by three.
+    """
+    from marine_formation_env.core import FormationCore
+    from marine_formation_env.dynamics import rk4_step
+    from marine_formation_env.scenarios import make_config
+
+    core = FormationCore(make_config("paper", action_level=level), num_envs=1)
+    core.reset(core.config.initial_state)
+    commands = core.physical_commands(np.zeros((1, 3, core.action_dim)))
+    rhs = core._closed_loop(commands)
+    state = core.state.view(_Counter)
+    h = core.config.dt / core.config.substeps
+    _Counter.ops = {}
+    for k in range(core.config.substeps):
+        state = rk4_step(rhs, state, h, k * h)
+    per_vessel = {name: n / 3.0 for name, n in _Counter.ops.items()}
+    transcendental = sum(v for k, v in per_vessel.items() if k in ("sin", "cos", "arctan", "sqrt", "hypot"))
+    return {
+        "level": level,
+        "substeps": core.config.substeps,
+        "ops_per_vessel_step": float(sum(per_vessel.values())),
+        "transcendental_per_vessel_step": float(transcendental),
+        "by_ufunc": per_vessel,
+    }
+
+
+def elementwise_peak(seconds: float = 0.5) -> float:
+    """This machine's numpy elementwise throughput [ops/s]: ``c = a*b + c`` on in-cache float64 arrays."""
+    n = 16384
+    a, b, c = np.random.default_rng(0).random((3, n))
+    tmp = np.empty(n)
+    count, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        for _ in range(200):
+            np.multiply(a, b, out=tmp)
+            np.add(tmp, c, out=c)
+        count += 200
+        c *= 0.5
+    return 2.0 * n * count / (time.perf_counter() - start)
+
+
+# ------------------------------------------------------------------- driver
+def _subprocess_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
+    cmd = [
+        sys.executable,
+        "-m",
+        "marine_formation_env.benchmark",
+        "--worker",
+        case,
+        str(b),
+        str(min_seconds),
+        str(repeats),
+    ]
+    env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    if proc.returncode != 0:
+        return {"unavailable": f"worker failed: {proc.stderr.strip().splitlines()[-1:]}"}
+    return json.loads(proc.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
+
+
+def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) -> dict[str, Any]:
+    """All cases, each in a subprocess; returns the JSON-friendly report."""
+    report: dict[str, Any] = {
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "numpy": np.__version__,
+        },
+        "settings": {"min_seconds": min_seconds, "repeats": repeats, "level": "force", "vessels": 3},
+        "parallel": {
+            "ours": _subprocess_case("ours_parallel", 1, min_seconds, repeats),
+            "mpe2": _subprocess_case("mpe2_parallel", 1, min_seconds, repeats),
+        },
+        "batched": {},
+    }
+    for b in batch_sizes:
+        report["batched"][str(b)] = {
+            "ours": _subprocess_case("ours_batched", b, min_seconds, repeats),
+            "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
+        }
+    ops = count_vessel_step_ops("force")
+    peak = elementwise_peak()
+    report["arithmetic"] = {**ops, "elementwise_peak_ops_per_s": peak}
+    for b, row in report["batched"].items():
+        ours = row["ours"]
+        if "env_steps_per_s" in ours:
+            vessel_steps = ours["env_steps_per_s"] * 3
+            ours["fraction_of_elementwise_peak"] = vessel_steps * ops["ops_per_vessel_step"] / peak
+        if "env_steps_per_s" in ours and "env_steps_per_s" in row["vmas"]:
+            row["ratio_ours_over_vmas"] = ours["env_steps_per_s"] / row["vmas"]["env_steps_per_s"]
+    par = report["parallel"]
+    if "steps_per_s" in par["ours"] and "steps_per_s" in par["mpe2"]:
+        par["ratio_ours_over_mpe2"] = par["ours"]["steps_per_s"] / par["mpe2"]["steps_per_s"]
+    return report
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """The report as a Markdown table."""
+
+    def rate(entry: dict[str, Any], key: str) -> str:
+        return f"{entry[key]:,.0f}" if key in entry else f"n/a ({entry.get('unavailable', '?')})"
+
+    def mem(entry: dict[str, Any]) -> str:
+        return f"{entry['max_rss_mb']:.0f}" if "max_rss_mb" in entry else "n/a"
+
+    par = report["parallel"]
+    lines = [
+        "| case | ours [steps/s] | peer [steps/s] | ours / peer | ours peak RSS [MB] | peer peak RSS [MB] |",
+        "|---|---|---|---|---|---|",
+        f"| ParallelEnv vs MPE2 simple_spread_v3 | {rate(par['ours'], 'steps_per_s')} | "
+        f"{rate(par['mpe2'], 'steps_per_s')} | {par.get('ratio_ours_over_mpe2', float('nan')):.2f} | "
+        f"{mem(par['ours'])} | {mem(par['mpe2'])} |",
+    ]
+    for b, row in report["batched"].items():
+        lines.append(
+            f"| batched B = {b} vs VMAS simple_spread (env-steps/s) | {rate(row['ours'], 'env_steps_per_s')} | "
+            f"{rate(row['vmas'], 'env_steps_per_s')} | {row.get('ratio_ours_over_vmas', float('nan')):.2f} | "
+            f"{mem(row['ours'])} | {mem(row['vmas'])} |"
+        )
+    ar = report["arithmetic"]
+    lines.append("")
+    lines.append(
+        f"One vessel-step at the force level ({ar['substeps']} RK4 substep(s)): "
+        f"{ar['ops_per_vessel_step']:.0f} elementwise ops ({ar['transcendental_per_vessel_step']:.0f} of them "
+        f"sin/cos/atan). Elementwise peak of this machine: {ar['elementwise_peak_ops_per_s'] / 1e9:.2f} Gop/s."
+    )
+    for b, row in report["batched"].items():
+        if "fraction_of_elementwise_peak" in row["ours"]:
+            lines.append(f"B = {b}: the batched core runs at {row['ours']['fraction_of_elementwise_peak']:.1%} of it.")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m marine_formation_env.benchmark", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--worker", nargs=4, metavar=("CASE", "B", "SECONDS", "REPEATS"), help=argparse.SUPPRESS)
+    parser.add_argument("--batch-sizes", type=int, nargs="+", default=list(BATCH_SIZES))
+    parser.add_argument("--seconds", type=float, default=2.0, help="minimum seconds per timing repeat (default 2)")
+    parser.add_argument("--repeats", type=int, default=5, help="timing repeats per case; the median is used")
+    parser.add_argument("--quick", action="store_true", help="B = 1, 64 only, 0.5 s × 3 repeats")
+    parser.add_argument("--json", type=Path, default=Path("results/throughput.json"))
+    args = parser.parse_args(argv)
+    if args.worker:
+        case, b, seconds, repeats = args.worker
+        print(json.dumps(run_case(case, int(b), float(seconds), int(repeats))))
+        return 0
+    if args.quick:
+        args.batch_sizes, args.seconds, args.repeats = [1, 64], 0.5, 3
+    report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
+    print(format_report(report))
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(report, indent=2))
+    print(f"\nwritten {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
