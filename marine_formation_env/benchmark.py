@@ -48,7 +48,7 @@ BATCH_SIZES = (1, 64, 1024, 8192)
 ACTION_POOL = 64  # pre-drawn random actions, cycled
 
 
-def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -> dict[str, float]:
+def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -> dict[str, Any]:
     """Median steps/s of ``repeats`` runs of at least ``min_seconds`` each (after a warm-up)."""
     for k in range(20):
         step(k)
@@ -67,7 +67,7 @@ def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -
 
 
 # ------------------------------------------------------------------ our cases
-def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
+def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
     from marine_formation_env.env import parallel_env
 
     env = parallel_env("paper", action_level="force")
@@ -83,7 +83,7 @@ def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
     return _time_steps(step, min_seconds, repeats)
 
 
-def _ours_batched(b: int, min_seconds: float, repeats: int) -> dict[str, float]:
+def _ours_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     from marine_formation_env.vector import MarineFormationVectorEnv
 
     env = MarineFormationVectorEnv(num_envs=b, scenario="paper", action_level="force")
@@ -100,7 +100,7 @@ def _ours_batched(b: int, min_seconds: float, repeats: int) -> dict[str, float]:
 
 
 # ------------------------------------------------------------------- peers
-def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
+def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
     from mpe2 import simple_spread_v3
 
     env = simple_spread_v3.parallel_env(N=3, continuous_actions=True)
@@ -119,7 +119,7 @@ def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, float]:
     return _time_steps(step, min_seconds, repeats)
 
 
-def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, float]:
+def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     import torch
     import vmas
 
@@ -188,7 +188,7 @@ def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
     core.reset(core.config.initial_state)
     commands = core.physical_commands(np.zeros((1, 3, core.action_dim)))
     rhs = core._closed_loop(commands)
-    state = core.state.view(_Counter)
+    state: np.ndarray = core.state.view(_Counter)
     h = core.config.dt / core.config.substeps
     _Counter.ops = {}
     for k in range(core.config.substeps):
@@ -263,7 +263,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
     ops = count_vessel_step_ops("force")
     peak = elementwise_peak()
     report["arithmetic"] = {**ops, "elementwise_peak_ops_per_s": peak}
-    for b, row in report["batched"].items():
+    for row in report["batched"].values():
         ours = row["ours"]
         if "env_steps_per_s" in ours:
             vessel_steps = ours["env_steps_per_s"] * 3
