@@ -31,8 +31,11 @@ vessel", "the one after" and so on in the same place for every vessel.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import importlib.util
+import os
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -107,6 +110,27 @@ class StepOutput:
     out_of_bounds: np.ndarray
 
 
+BACKENDS = ("auto", "numpy", "numba")
+
+
+def resolve_backend(backend: str) -> str:
+    """``"numpy"`` or ``"numba"`` for a requested backend (``"auto"``: numba if installed).
+
+    The environment variable ``MARINE_FORMATION_BACKEND`` overrides ``"auto"``.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; choose one of {list(BACKENDS)}")
+    if backend == "auto":
+        backend = os.environ.get("MARINE_FORMATION_BACKEND", "auto")
+        if backend not in BACKENDS:
+            raise ValueError(f"MARINE_FORMATION_BACKEND={backend!r}; choose one of {list(BACKENDS)}")
+    if backend == "auto":
+        return "numba" if importlib.util.find_spec("numba") is not None else "numpy"
+    if backend == "numba" and importlib.util.find_spec("numba") is None:
+        raise ImportError("backend 'numba' needs numba: pip install 'marine-formation-env[fast]'")
+    return backend
+
+
 def _bounded_cost(error: np.ndarray, sigma: float) -> np.ndarray:
     z2 = np.square(error / sigma)
     return z2 / (1.0 + z2)
@@ -118,6 +142,13 @@ class FormationCore:
     Args:
         config: a validated :class:`ScenarioConfig`.
         num_envs: number of formations ``B``.
+        backend: ``"numpy"`` (the reference implementation), ``"numba"`` (one
+            fused compiled kernel per step, :mod:`marine_formation_env._numba`,
+            which compiles the same model and controller functions; results are
+            identical to the numpy path up to floating-point rounding, bit for
+            bit in the tests), or ``"auto"``: numba when it is installed
+            (``pip install 'marine-formation-env[fast]'``), else numpy. The
+            environment variable ``MARINE_FORMATION_BACKEND`` overrides ``auto``.
 
     Attributes:
         state: ``(B, N, 6)`` float64, columns ``x, y, psi, u, v, r``.
@@ -125,9 +156,10 @@ class FormationCore:
         steps: ``(B,)`` control periods since reset.
     """
 
-    def __init__(self, config: ScenarioConfig, num_envs: int = 1) -> None:
+    def __init__(self, config: ScenarioConfig, num_envs: int = 1, backend: str = "auto") -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer ≥ 1, got {num_envs!r}")
+        self.backend = resolve_backend(backend)
         self.config = config
         self.num_envs = int(num_envs)
         self.n = config.n_vessels
@@ -140,11 +172,46 @@ class FormationCore:
         self._slot_mask = config.graph.adjacency[np.arange(n)[:, None], self._slot_index].astype(float)
         self._pairs = np.triu_indices(n, k=1)
         self.obs_low, self.obs_high = self._observation_bounds()
+        self._noise = config.init_noise.as_array()
+        self._noise_free = config.init_noise.is_zero
         self.state = np.zeros((self.num_envs, n, 6))
         self.time = np.zeros(self.num_envs)
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
         self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
+        self._kernel_args: tuple[Any, ...] | None = None
+        if self.backend == "numba":
+            from marine_formation_env import _numba
+
+            coeffs, gains = _numba.coefficients(config)
+            w = config.reward
+            self._kernel = _numba.step_kernel(self.num_envs)
+            self._kernel_args = (
+                _numba.LEVEL_CODES[config.action_level],
+                coeffs,
+                gains,
+                config.paper_as_printed,
+                config.dt,
+                config.substeps,
+                config.tau_u_max,
+                config.tau_r_max,
+                np.ascontiguousarray(config.formation),
+                self._slot_index,
+                self._slot_mask,
+            )
+            self._kernel_limits = (
+                self.obs_low,
+                self.obs_high,
+                np.array([w.cross_track, w.heading, w.coordination, w.speed, w.effort]),
+                np.array([w.sigma_cross_track, w.sigma_heading, w.sigma_coordination, w.sigma_speed]),
+            )
+            self._kernel_tail = (
+                w.total_weight if w.terminal_penalty else 0.0,
+                np.array(config.workspace),
+                config.safety_distance,
+                config.max_speed,
+                config.max_yaw_rate,
+            )
 
     def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-agent observation bounds ``(low, high)`` (float32, see :meth:`observation_space`)."""
@@ -192,18 +259,22 @@ class FormationCore:
         twice the safety distance.
         """
         cfg = self.config
-        nominal = np.array(cfg.initial_state)
-        if cfg.init_noise.is_zero:
-            return nominal
-        half = cfg.init_noise.as_array()
+        if self._noise_free:
+            return np.array(cfg.initial_state)
         for _ in range(100):
-            candidate = nominal + rng.uniform(-1.0, 1.0, size=nominal.shape) * half
-            if self.n < 2 or self._min_separation(candidate[None])[0] > 2.0 * cfg.safety_distance:
+            candidate = cfg.initial_state + rng.uniform(-1.0, 1.0, size=cfg.initial_state.shape) * self._noise
+            if self._min_separation(candidate[None])[0] > 2.0 * cfg.safety_distance:
                 return candidate
         raise RuntimeError(
             f"could not draw an initial state with vessels more than {2 * cfg.safety_distance} m apart "
             f"in 100 tries; reduce init_noise ({cfg.init_noise}) or safety_distance"
         )
+
+    def sample_initial_states(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
+        """One initial state per generator, ``(len(rngs), N, 6)`` (see :meth:`sample_initial_state`)."""
+        if self._noise_free:
+            return np.broadcast_to(self.config.initial_state, (len(rngs), self.n, 6)).copy()
+        return np.stack([self.sample_initial_state(rng) for rng in rngs])
 
     def reset(self, initial_state: np.ndarray, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
         """Set the state of formations ``env_ids`` (all if None) and return their observations.
@@ -226,7 +297,7 @@ class FormationCore:
         self.time[ids] = 0.0
         self.steps[ids] = 0
         self._fresh[ids] = True  # the first command after a reset is held, not ramped
-        return self.observe()[ids]
+        return self.observe(ids)
 
     # ------------------------------------------------------------------- step
     def physical_commands(self, actions: np.ndarray) -> dict[str, np.ndarray]:
@@ -282,17 +353,71 @@ class FormationCore:
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
             self._fresh[:] = False
-        rhs = self._closed_loop(commands)
-        h = cfg.dt / cfg.substeps
-        state = self.state
-        for k in range(cfg.substeps):
-            state = rk4_step(rhs, state, h, k * h)
-        self.state = state
-        self.time = self.time + cfg.dt
-        self.steps = self.steps + 1
+        clipped = np.clip(actions, -1.0, 1.0)
+        if self._kernel_args is not None:
+            out = self._step_compiled(clipped, commands)
+        else:
+            rhs = self._closed_loop(commands)
+            h = cfg.dt / cfg.substeps
+            state = self.state
+            for k in range(cfg.substeps):
+                state = rk4_step(rhs, state, h, k * h)
+            self.state = state
+            self.time = self.time + cfg.dt
+            self.steps = self.steps + 1
+            out = self._outputs(clipped, commands.get("u_c"))
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
-        return self._outputs(np.clip(actions, -1.0, 1.0), commands.get("u_c"))
+        return out
+
+    def _step_compiled(self, actions: np.ndarray, commands: dict[str, np.ndarray]) -> StepOutput:
+        """The same step as the numpy path, in one fused numba kernel (``backend="numba"``)."""
+        cfg = self.config
+        b, n = self.num_envs, self.n
+        cmd = np.zeros((b, n, 2))
+        if cfg.action_level == "force":
+            cmd[..., 0], cmd[..., 1] = commands["tau_u"], commands["tau_r"]
+        else:
+            cmd[..., 0] = commands["u_c"]
+            if cfg.action_level == "guidance":
+                cmd[..., 1] = commands["psi_d"]
+        self.time = self.time + cfg.dt
+        self.steps = self.steps + 1
+        obs = np.empty((b, n, self.layout.dim), dtype=np.float32)
+        comps = np.empty((len(REWARD_COMPONENTS), b, n))
+        flags = np.empty((b, 2), dtype=np.bool_)
+        reward = np.empty((b, n))
+        assert self._kernel_args is not None
+        self._kernel(
+            self.state,
+            cmd,
+            self._last_u_c,
+            *self._kernel_args,
+            np.asarray(cfg.u_d.value(self.time), dtype=float),
+            np.asarray(cfg.u_d.rate(self.time), dtype=float),
+            cfg.horizon - self.time,
+            *self._kernel_limits,
+            actions,
+            *self._kernel_tail,
+            obs,
+            comps,
+            reward,
+            flags,
+            np.empty((b, n)),
+            np.empty((b, n)),
+        )
+        components = dict(zip(REWARD_COMPONENTS, comps, strict=True))
+        terminated = flags[:, 0] | flags[:, 1]
+        return StepOutput(
+            observation=obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=(self.steps >= cfg.max_steps) & ~terminated,
+            components=components,
+            commanded_speed=None if "u_c" not in commands else np.array(commands["u_c"], copy=True),
+            collision=flags[:, 0].copy(),
+            out_of_bounds=flags[:, 1].copy(),
+        )
 
     def _closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
         """The vector field ``rhs(t, state)`` of the vessels over one control period.
@@ -337,25 +462,29 @@ class FormationCore:
         return rhs_speed
 
     # ------------------------------------------------------------ observation
-    def _along_track(self) -> tuple[np.ndarray, np.ndarray]:
-        s = self.state
+    def _along_track(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """θ = x − D_x and ẋ of states ``s`` ``(b, N, 6)``."""
         psi, u, v = s[..., PSI], s[..., U], s[..., V]
         theta = s[..., X] - self._dx
         x_dot = u * np.cos(psi) - v * np.sin(psi)
         return theta, x_dot
 
-    def observe(self) -> np.ndarray:
-        """Masked per-agent observations ``(B, N, dim)`` float32 (module docstring)."""
+    def observe(self, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
+        """Masked per-agent observations ``(B, N, dim)`` float32 (module docstring).
+
+        With ``env_ids``, only those formations' observations ``(len(env_ids), N, dim)``.
+        """
         cfg = self.config
-        s = self.state
-        b, n = self.num_envs, self.n
+        ids = slice(None) if env_ids is None else env_ids
+        s, time = self.state[ids], self.time[ids]
+        b, n = s.shape[0], self.n
         out = np.zeros((b, n, self.layout.dim), dtype=np.float32)
         out[..., 0] = s[..., Y] - self._dy
         out[..., 1] = wrap_angle(s[..., PSI])
         out[..., 2:5] = s[..., U : R + 1]
-        out[..., 5] = cfg.u_d.value(self.time)[:, None]
-        out[..., 6] = cfg.u_d.rate(self.time)[:, None]
-        theta, x_dot = self._along_track()
+        out[..., 5] = cfg.u_d.value(time)[:, None]
+        out[..., 6] = cfg.u_d.rate(time)[:, None]
+        theta, x_dot = self._along_track(s)
         idx = self._slot_index
         slots = out[..., self.layout.own :].reshape(b, n, n - 1, self.layout.slot)
         slots[..., 0] = self._slot_mask
@@ -377,7 +506,7 @@ class FormationCore:
     def _outputs(self, actions: np.ndarray, u_c: np.ndarray | None) -> StepOutput:
         cfg, w = self.config, self.config.reward
         s = self.state
-        theta, x_dot = self._along_track()
+        theta, x_dot = self._along_track(s)
         u_d = cfg.u_d.value(self.time)[:, None]
         scale = -cfg.dt
         components = {

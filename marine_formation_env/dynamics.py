@@ -15,6 +15,7 @@ controller cannot drift apart.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -26,11 +27,11 @@ __all__ = ["PSI", "R", "U", "V", "X", "Y", "accelerations", "rk4_step", "vessel_
 X, Y, PSI, U, V, R = range(6)
 
 
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
-    """Wrap an angle [rad] to ``[−π, π)`` (Fossen's smallest signed angle)."""
-    wrapped = np.mod(np.asarray(angle) + np.pi, 2.0 * np.pi) - np.pi
+def wrap_angle(angle: Any) -> Any:
+    """Wrap an angle [rad] to ``[−π, π)`` (Fossen's smallest signed angle); scalars or arrays."""
+    wrapped = np.mod(angle + np.pi, 2.0 * np.pi) - np.pi
     # np.mod rounds a tiny negative argument up to 2π; keep the interval half-open.
-    return np.where(wrapped >= np.pi, wrapped - 2.0 * np.pi, wrapped)
+    return wrapped - (2.0 * np.pi) * (wrapped >= np.pi)
 
 
 def accelerations(
@@ -61,6 +62,26 @@ def accelerations(
     return a_u, v_dot, a_r
 
 
+def vessel_derivatives(
+    p: VesselParams,
+    psi: Any,
+    u: Any,
+    v: Any,
+    r: Any,
+    tau_u: Any,
+    tau_r: Any,
+    acc: tuple[Any, Any, Any] | None = None,
+) -> tuple[Any, Any, Any, Any, Any, Any]:
+    """Eqs. (1)-(4) component by component: ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
+
+    Works element-wise on scalars or arrays of one shape (it is also compiled
+    by the optional numba backend, so it sticks to arithmetic and ufuncs).
+    """
+    c, s = np.cos(psi), np.sin(psi)
+    a_u, v_dot, a_r = accelerations(p, u, v, r) if acc is None else acc
+    return u * c - v * s, u * s + v * c, r, a_u + tau_u, v_dot, a_r + tau_r
+
+
 def vessel_rhs(
     p: VesselParams,
     state: np.ndarray,
@@ -80,16 +101,10 @@ def vessel_rhs(
     Returns:
         ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
     """
-    psi, u, v, r = state[..., PSI], state[..., U], state[..., V], state[..., R]
-    c, s = np.cos(psi), np.sin(psi)
-    a_u, v_dot, a_r = accelerations(p, u, v, r) if acc is None else acc
     out = np.empty_like(state)
-    out[..., X] = u * c - v * s
-    out[..., Y] = u * s + v * c
-    out[..., PSI] = r
-    out[..., U] = a_u + tau_u
-    out[..., V] = v_dot
-    out[..., R] = a_r + tau_r
+    derivs = vessel_derivatives(p, state[..., PSI], state[..., U], state[..., V], state[..., R], tau_u, tau_r, acc)
+    for k, value in enumerate(derivs):
+        out[..., k] = value
     return out
 
 

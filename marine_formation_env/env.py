@@ -143,6 +143,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     |--------------------|----------------------|------------------------------------------------------------|
     | `scenario`         | `"paper"`            | named defaults (`marine_formation_env.SCENARIOS`)          |
     | `render_mode`      | None                 | `"rgb_array"` or `"human"`                                 |
+    | `backend`          | `"auto"`             | `numpy` or `numba` (auto: numba if installed); same results |
     | `action_level`     | `"speed"`            | `force`, `guidance` or `speed`                             |
     | `dt`               | 0.1 / 0.5 / 0.5 s    | control period (force / guidance / speed)                  |
     | `substeps`         | ceil(dt / 0.1 s)     | RK4 steps per control period                               |
@@ -170,12 +171,14 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         "render_fps": 10,
     }
 
-    def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
+    def __init__(
+        self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
+    ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
         self.config: ScenarioConfig = make_config(scenario, **overrides)
         self.render_mode = render_mode
-        self.core = FormationCore(self.config, num_envs=1)
+        self.core = FormationCore(self.config, num_envs=1, backend=backend)
         n = self.config.n_vessels
         self.possible_agents = [f"vessel_{j}" for j in range(n)]
         self.agents: list[str] = []

@@ -46,11 +46,13 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012 - gymnasium API
 
-    def __init__(self, scenario: str = "paper", render_mode: str | None = None, **overrides: Any) -> None:
+    def __init__(
+        self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
+    ) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
         self.config: ScenarioConfig = make_config(scenario, **overrides)
-        self.core = FormationCore(self.config, num_envs=1)
+        self.core = FormationCore(self.config, num_envs=1, backend=backend)
         self.render_mode = render_mode
         n, a = self.config.n_vessels, self.config.action_dim
         block = self.core.observation_space()

@@ -12,7 +12,8 @@ Two layouts of the same simulation:
 * ``layout="joint"`` (default): one entry per formation, as the centralized
   ``gymnasium.make("MarineFormation-v0")`` view: observation ``(N·dim,)`` (the
   vessels' masked observations concatenated), action ``(N·A,)``, reward the mean
-  of the vessels' rewards. ``num_envs = B``.
+  of the vessels' rewards. ``num_envs = B``. ``infos["reward_components"]``
+  maps each term to its ``(B, N)`` per-vessel values.
 * ``layout="agent"``: one entry per vessel (parameter sharing), entry
   ``b·N + j`` is vessel ``j`` of formation ``b``; observation ``(dim,)``,
   action ``(A,)``, reward that vessel's own. ``num_envs = B·N``; a formation's
@@ -71,6 +72,7 @@ class MarineFormationVectorEnv(VectorEnv):
         autoreset_mode: :class:`gymnasium.vector.AutoresetMode` ``NEXT_STEP``
             or ``SAME_STEP`` (or their string values).
         render_mode: ``"rgb_array"`` renders formation 0.
+        backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see :class:`~marine_formation_env.core.FormationCore`).
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 - gymnasium reads it from the class
@@ -85,6 +87,7 @@ class MarineFormationVectorEnv(VectorEnv):
         layout: str = "joint",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
+        backend: str = "auto",
         **overrides: Any,
     ) -> None:
         if layout not in LAYOUTS:
@@ -95,7 +98,7 @@ class MarineFormationVectorEnv(VectorEnv):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
         self.config: ScenarioConfig = make_config(scenario, **overrides)
-        self.core = FormationCore(self.config, num_envs=num_envs)
+        self.core = FormationCore(self.config, num_envs=num_envs, backend=backend)
         self.num_formations = self.core.num_envs
         self.n_vessels = self.config.n_vessels
         self.layout = layout
@@ -140,7 +143,7 @@ class MarineFormationVectorEnv(VectorEnv):
             self._rngs = [seeding.np_random(int(s))[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
         initial = (options or {}).get("initial_state")
         if initial is None:
-            initial = np.stack([self.core.sample_initial_state(rng) for rng in self._rngs])
+            initial = self.core.sample_initial_states(self._rngs)
         self.core.reset(initial)
         self._needs_reset[:] = False
         self._started = True
@@ -182,8 +185,7 @@ class MarineFormationVectorEnv(VectorEnv):
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
-        initial = np.stack([self.core.sample_initial_state(self._rngs[k]) for k in ids])
-        return self.core.reset(initial, env_ids=ids)
+        return self.core.reset(self.core.sample_initial_states([self._rngs[k] for k in ids]), env_ids=ids)
 
     # ---------------------------------------------------------------- layouts
     def _layout_obs(self, obs: np.ndarray) -> np.ndarray:
@@ -218,7 +220,7 @@ class MarineFormationVectorEnv(VectorEnv):
         """Vectorized infos: every entry is an array over the entries."""
         if self.layout == "joint":
             infos: dict[str, Any] = {
-                "reward_components": {k: v.mean(axis=1) for k, v in out.components.items()},
+                "reward_components": out.components,  # name -> (B, N): per vessel
                 "collision": out.collision.copy(),
                 "out_of_bounds": out.out_of_bounds.copy(),
             }

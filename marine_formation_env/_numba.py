@@ -1,0 +1,280 @@
+"""Optional compiled backend: one fused numba kernel for a whole batched step.
+
+It compiles the *same* model and controller functions as the numpy path
+(:mod:`~marine_formation_env.dynamics`, :mod:`~marine_formation_env.control`):
+they are registered with numba (``register_jitable``) and called per vessel on
+scalars, so the equations exist once. What the kernel adds is the loop: per
+formation (in parallel), per vessel, the RK4 substeps of the level's closed
+loop, then the masked observations, reward components and terminations, all
+without temporaries. :class:`~marine_formation_env.core.FormationCore` uses
+it when numba is installed (``backend="auto"``) and keeps the numpy path as
+the reference implementation; the tests check that both agree.
+"""
+
+from __future__ import annotations
+
+import types
+from collections import namedtuple
+from typing import Any
+
+import numpy as np
+from numba import njit, prange
+from numba.extending import register_jitable
+
+from marine_formation_env import control, dynamics
+
+__all__ = ["LEVEL_CODES", "coefficients", "step_kernel"]
+
+LEVEL_CODES = {"force": 0, "guidance": 1, "speed": 2}
+
+Coeffs = namedtuple("Coeffs", "m11 m22 m23 m33 d11 d22 d23 d32 d33 lam")
+GainsT = namedtuple("GainsT", "k_u k_psi k_r delta a")
+
+for _fn in (
+    dynamics.accelerations,
+    dynamics.vessel_derivatives,
+    dynamics.wrap_angle,
+    control.saturation,
+    control.los_angle,
+    control.surge_law,
+    control.yaw_law,
+    control.los_yaw_reference,
+    control.heading_yaw_reference,
+    control.path_following_inputs,
+    control.heading_tracking_inputs,
+):
+    register_jitable(_fn)
+
+accelerations = dynamics.accelerations
+vessel_derivatives = dynamics.vessel_derivatives
+wrap_angle = dynamics.wrap_angle
+path_following_inputs = control.path_following_inputs
+heading_tracking_inputs = control.heading_tracking_inputs
+
+
+def coefficients(config: Any) -> tuple[Any, Any]:
+    """The vessel and gain values of ``config`` as the tuples the kernel takes."""
+    p, g = config.params, config.gains
+    return (
+        Coeffs(p.m11, p.m22, p.m23, p.m33, p.d11, p.d22, p.d23, p.d32, p.d33, p.lam),
+        GainsT(g.k_u, g.k_psi, g.k_r, g.delta, g.a),
+    )
+
+
+@njit(cache=True, inline="always")
+def _clip(x: float, lo: float, hi: float) -> float:
+    return min(max(x, lo), hi)
+
+
+@njit(cache=True, inline="always")
+def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0, u_c_dot, tu_max, tr_max):  # type: ignore[no-untyped-def]
+    """The closed loop of one vessel (the numpy path's ``FormationCore._closed_loop``)."""
+    if level == 0:
+        return vessel_derivatives(p, psi, u, v, r, cmd0, cmd1)
+    acc = accelerations(p, u, v, r)
+    if level == 1:
+        tau_u, tau_r = heading_tracking_inputs(p, g, psi, u, v, r, u_c0 + u_c_dot * t, cmd1, printed, acc, u_c_dot)
+    else:
+        tau_u, tau_r = path_following_inputs(p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
+    return vessel_derivatives(p, psi, u, v, r, _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max), acc)
+
+
+def _kernel(  # type: ignore[no-untyped-def]
+    state,  # (B, N, 6) float64, updated in place
+    cmd,  # (B, N, 2) physical commands: (τ_u, τ_r) | (u_c, ψ_d) | (u_c, 0)
+    u_c0,  # (B, N) previous u_c (first-order hold)
+    level,
+    p,
+    g,
+    printed,
+    dt,
+    substeps,
+    tu_max,
+    tr_max,
+    offsets,  # (N, 2)
+    slot_index,  # (N, N-1)
+    slot_mask,  # (N, N-1) float
+    u_d,  # (B,) u_d at the new time
+    u_d_rate,  # (B,)
+    time_left,  # (B,) horizon − new time
+    obs_low,  # (D,) float32
+    obs_high,  # (D,) float32
+    weights,  # (5,) cross_track, heading, coordination, speed, effort
+    sigmas,  # (4,)
+    actions,  # (B, N, A) clipped normalized actions (for the effort term)
+    terminal_penalty,  # worst remaining reward rate (Σ weights), 0 if off
+    workspace,  # (4,)
+    safety,
+    max_speed,
+    max_yaw_rate,
+    obs,  # (B, N, D) float32 out
+    comps,  # (6, B, N) out
+    reward,  # (B, N) out: the sum of the components
+    flags,  # (B, 2) bool out: collision, out_of_bounds
+    theta,  # (B, N) scratch: x − D_x
+    xdot,  # (B, N) scratch: ẋ
+):
+    n_form, n = state.shape[0], state.shape[1]
+    h = dt / substeps
+    for b in prange(n_form):
+        # ---- integrate every vessel of formation b over one control period
+        for j in range(n):
+            x, y, psi, u, v, r = (
+                state[b, j, 0],
+                state[b, j, 1],
+                state[b, j, 2],
+                state[b, j, 3],
+                state[b, j, 4],
+                state[b, j, 5],
+            )
+            c0, c1, uc0 = cmd[b, j, 0], cmd[b, j, 1], u_c0[b, j]
+            uc_dot = (c0 - uc0) / dt
+            d_y = offsets[j, 1]
+            for k in range(substeps):
+                t = k * h
+                k1 = _derivative(level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max)
+                hh = 0.5 * h
+                k2 = _derivative(
+                    level,
+                    p,
+                    g,
+                    printed,
+                    d_y,
+                    y + hh * k1[1],
+                    psi + hh * k1[2],
+                    u + hh * k1[3],
+                    v + hh * k1[4],
+                    r + hh * k1[5],
+                    c0,
+                    c1,
+                    t + hh,
+                    uc0,
+                    uc_dot,
+                    tu_max,
+                    tr_max,
+                )
+                k3 = _derivative(
+                    level,
+                    p,
+                    g,
+                    printed,
+                    d_y,
+                    y + hh * k2[1],
+                    psi + hh * k2[2],
+                    u + hh * k2[3],
+                    v + hh * k2[4],
+                    r + hh * k2[5],
+                    c0,
+                    c1,
+                    t + hh,
+                    uc0,
+                    uc_dot,
+                    tu_max,
+                    tr_max,
+                )
+                k4 = _derivative(
+                    level,
+                    p,
+                    g,
+                    printed,
+                    d_y,
+                    y + h * k3[1],
+                    psi + h * k3[2],
+                    u + h * k3[3],
+                    v + h * k3[4],
+                    r + h * k3[5],
+                    c0,
+                    c1,
+                    t + h,
+                    uc0,
+                    uc_dot,
+                    tu_max,
+                    tr_max,
+                )
+                w = h / 6.0
+                x = x + w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
+                y = y + w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])
+                psi = psi + w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2])
+                u = u + w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3])
+                v = v + w * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4])
+                r = r + w * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5])
+            state[b, j, 0], state[b, j, 1], state[b, j, 2] = x, y, psi
+            state[b, j, 3], state[b, j, 4], state[b, j, 5] = u, v, r
+
+        # ---- formation quantities
+        theta_mean = 0.0
+        for j in range(n):
+            theta[b, j] = state[b, j, 0] - offsets[j, 0]
+            xdot[b, j] = state[b, j, 3] * np.cos(state[b, j, 2]) - state[b, j, 4] * np.sin(state[b, j, 2])
+            theta_mean += theta[b, j]
+        theta_mean /= n
+        out_of_bounds = False
+        min_sep = np.inf
+        for j in range(n):
+            sx, sy = state[b, j, 0], state[b, j, 1]
+            if sx < workspace[0] or sx > workspace[1] or sy < workspace[2] or sy > workspace[3]:
+                out_of_bounds = True
+            if abs(state[b, j, 3]) > max_speed or abs(state[b, j, 4]) > max_speed:
+                out_of_bounds = True
+            if abs(state[b, j, 5]) > max_yaw_rate:
+                out_of_bounds = True
+            for m in range(6):
+                if not np.isfinite(state[b, j, m]):
+                    out_of_bounds = True
+            for i in range(j + 1, n):
+                d = np.hypot(sx - state[b, i, 0], sy - state[b, i, 1])
+                min_sep = min(min_sep, d)
+        collision = min_sep < safety
+        terminated = collision or out_of_bounds
+        flags[b, 0] = collision
+        flags[b, 1] = out_of_bounds
+
+        # ---- observations and rewards
+        for j in range(n):
+            u_j, v_j = state[b, j, 3], state[b, j, 4]
+            e_j = state[b, j, 1] - offsets[j, 1]
+            theta_j, xdot_j = theta[b, j], xdot[b, j]
+            psi_w = wrap_angle(state[b, j, 2])
+            own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b])
+            for f in range(7):
+                obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
+            for kk in range(n - 1):
+                i = slot_index[j, kk]
+                base = 7 + 4 * kk
+                link = slot_mask[j, kk]
+                obs[b, j, base] = link
+                obs[b, j, base + 1] = _clip(link * (theta_j - theta[b, i]), obs_low[base + 1], obs_high[base + 1])
+                obs[b, j, base + 2] = _clip(link * (xdot_j - xdot[b, i]), obs_low[base + 2], obs_high[base + 2])
+                obs[b, j, base + 3] = 0.0
+            errors = (e_j, psi_w, theta_j - theta_mean, xdot_j - u_d[b])
+            for c in range(4):
+                z2 = (errors[c] / sigmas[c]) ** 2
+                comps[c, b, j] = -dt * weights[c] * (z2 / (1.0 + z2))
+            sq = 0.0
+            for f in range(actions.shape[2]):
+                sq += actions[b, j, f] * actions[b, j, f]
+            comps[4, b, j] = -dt * weights[4] * (sq / actions.shape[2])
+            comps[5, b, j] = -terminal_penalty * max(time_left[b], 0.0) if terminated else 0.0
+            total = 0.0
+            for c in range(6):
+                total += comps[c, b, j]
+            reward[b, j] = total
+
+
+def _renamed(fn: Any, name: str) -> Any:
+    """A copy of ``fn`` under another name, so numba caches its two compilations apart."""
+    copy = types.FunctionType(fn.__code__, fn.__globals__, name, fn.__defaults__, fn.__closure__)
+    copy.__qualname__ = name
+    return copy
+
+
+_serial = njit(cache=True)(_kernel)
+_parallel = njit(cache=True, parallel=True)(_renamed(_kernel, "_kernel_parallel"))
+
+#: Formations from which the multi-threaded kernel is used.
+PARALLEL_FROM = 64
+
+
+def step_kernel(n_formations: int) -> Any:
+    """The kernel to use for ``n_formations`` formations (threads only pay off for many)."""
+    return _parallel if n_formations >= PARALLEL_FROM else _serial
