@@ -67,10 +67,10 @@ def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -
 
 
 # ------------------------------------------------------------------ our cases
-def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
+def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto") -> dict[str, Any]:
     from marine_formation_env.env import parallel_env
 
-    env = parallel_env("paper", action_level="force")
+    env = parallel_env("paper", action_level="force", backend=backend)
     rng = np.random.default_rng(0)
     pool = [{a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents} for _ in range(ACTION_POOL)]
     env.reset(seed=0)
@@ -83,10 +83,10 @@ def _ours_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
     return _time_steps(step, min_seconds, repeats)
 
 
-def _ours_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
+def _ours_batched(b: int, min_seconds: float, repeats: int, backend: str = "auto") -> dict[str, Any]:
     from marine_formation_env.vector import MarineFormationVectorEnv
 
-    env = MarineFormationVectorEnv(num_envs=b, scenario="paper", action_level="force")
+    env = MarineFormationVectorEnv(num_envs=b, scenario="paper", action_level="force", backend=backend)
     rng = np.random.default_rng(0)
     pool = [rng.uniform(-1, 1, env.action_space.shape).astype(np.float32) for _ in range(8)]
     env.reset(seed=0)
@@ -141,6 +141,10 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
     try:
         if case == "ours_parallel":
             out: dict[str, Any] = _ours_parallel(min_seconds, repeats)
+        elif case == "ours_numpy_parallel":
+            out = _ours_parallel(min_seconds, repeats, backend="numpy")
+        elif case == "ours_numpy_batched":
+            out = _ours_batched(b, min_seconds, repeats, backend="numpy")
         elif case == "mpe2_parallel":
             out = _mpe2_parallel(min_seconds, repeats)
         elif case == "ours_batched":
@@ -251,6 +255,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
         "settings": {"min_seconds": min_seconds, "repeats": repeats, "level": "force", "vessels": 3},
         "parallel": {
             "ours": _subprocess_case("ours_parallel", 1, min_seconds, repeats),
+            "ours_numpy": _subprocess_case("ours_numpy_parallel", 1, min_seconds, repeats),
             "mpe2": _subprocess_case("mpe2_parallel", 1, min_seconds, repeats),
         },
         "batched": {},
@@ -258,6 +263,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
     for b in batch_sizes:
         report["batched"][str(b)] = {
             "ours": _subprocess_case("ours_batched", b, min_seconds, repeats),
+            "ours_numpy": _subprocess_case("ours_numpy_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
         }
     ops = count_vessel_step_ops("force")
@@ -286,18 +292,25 @@ def format_report(report: dict[str, Any]) -> str:
         return f"{entry['max_rss_mb']:.0f}" if "max_rss_mb" in entry else "n/a"
 
     par = report["parallel"]
+
+    def ratio(a: dict[str, Any], b: dict[str, Any], key: str) -> str:
+        return f"{a[key] / b[key]:.2f}" if key in a and key in b else "n/a"
+
     lines = [
-        "| case | ours [steps/s] | peer [steps/s] | ours / peer | ours peak RSS [MB] | peer peak RSS [MB] |",
-        "|---|---|---|---|---|---|",
+        "| case | ours [steps/s] | peer [steps/s] | ours / peer | ours, numpy backend | numpy / peer "
+        "| ours peak RSS [MB] | peer peak RSS [MB] |",
+        "|---|---|---|---|---|---|---|---|",
         f"| ParallelEnv vs MPE2 simple_spread_v3 | {rate(par['ours'], 'steps_per_s')} | "
-        f"{rate(par['mpe2'], 'steps_per_s')} | {par.get('ratio_ours_over_mpe2', float('nan')):.2f} | "
+        f"{rate(par['mpe2'], 'steps_per_s')} | {ratio(par['ours'], par['mpe2'], 'steps_per_s')} | "
+        f"{rate(par['ours_numpy'], 'steps_per_s')} | {ratio(par['ours_numpy'], par['mpe2'], 'steps_per_s')} | "
         f"{mem(par['ours'])} | {mem(par['mpe2'])} |",
     ]
     for b, row in report["batched"].items():
+        key = "env_steps_per_s"
         lines.append(
-            f"| batched B = {b} vs VMAS simple_spread (env-steps/s) | {rate(row['ours'], 'env_steps_per_s')} | "
-            f"{rate(row['vmas'], 'env_steps_per_s')} | {row.get('ratio_ours_over_vmas', float('nan')):.2f} | "
-            f"{mem(row['ours'])} | {mem(row['vmas'])} |"
+            f"| batched B = {b} vs VMAS simple_spread (env-steps/s) | {rate(row['ours'], key)} | "
+            f"{rate(row['vmas'], key)} | {ratio(row['ours'], row['vmas'], key)} | {rate(row['ours_numpy'], key)} | "
+            f"{ratio(row['ours_numpy'], row['vmas'], key)} | {mem(row['ours'])} | {mem(row['vmas'])} |"
         )
     ar = report["arithmetic"]
     lines.append("")

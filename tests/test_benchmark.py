@@ -1,0 +1,44 @@
+"""The throughput benchmark's instruments (not its timings: those live in the script, as ratios)."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from marine_formation_env import benchmark
+from marine_formation_env.dynamics import vessel_rhs
+from marine_formation_env.params import SUPPLY
+
+
+def test_counter_counts_elementwise_operations() -> None:
+    benchmark._Counter.ops = {}
+    a = np.arange(5.0).view(benchmark._Counter)
+    _ = a * 2.0 + np.sin(a)  # 5 multiplies, 5 sines, 5 additions
+    assert benchmark._Counter.ops == {"multiply": 5, "sin": 5, "add": 5}
+
+
+def test_vessel_step_count_is_four_stages_plus_the_rk4_combination() -> None:
+    # One force-level control period is one RK4 step: 4 evaluations of the vessel ODE,
+    # 3 stage states (a multiply and an add per component) and the final combination
+    # (k2 + k3, 2·(…), + k1, + k4, (h/6)·(…), state + …: 6 operations per component).
+    benchmark._Counter.ops = {}
+    state = np.array([[0.0, 1.0, 0.2, 5.0, 0.1, 0.01]]).view(benchmark._Counter)
+    vessel_rhs(SUPPLY, state, 0.1, 0.01)
+    one_rhs = sum(benchmark._Counter.ops.values())
+    counted = benchmark.count_vessel_step_ops("force")
+    assert counted["substeps"] == 1
+    assert counted["ops_per_vessel_step"] == 4 * one_rhs + 3 * 2 * 6 + 6 * 6
+    assert counted["transcendental_per_vessel_step"] == 8  # sin and cos at each stage
+
+
+def test_cases_report_rates_and_missing_peers(monkeypatch: pytest.MonkeyPatch) -> None:
+    ours = benchmark.run_case("ours_batched", 4, 0.05, 1)
+    assert ours["env_steps_per_s"] == pytest.approx(4 * ours["steps_per_s"])
+    assert ours["steps_per_s"] > 0 and ours["max_rss_mb"] > 0
+    monkeypatch.setitem(sys.modules, "vmas", None)  # import vmas now raises ImportError
+    missing = benchmark.run_case("vmas_batched", 4, 0.05, 1)
+    assert "unavailable" in missing and "vmas" in missing["unavailable"]
+    with pytest.raises(ValueError, match="'warp_drive'"):
+        benchmark.run_case("warp_drive", 1, 0.05, 1)
