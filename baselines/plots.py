@@ -22,13 +22,23 @@ from marine_formation_env.dynamics import wrap_angle
 from marine_formation_env.render import require_matplotlib, vessel_color
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["plot_episode"]
+__all__ = ["plot_comparison", "plot_episode"]
 
 
 def _snapshot_indices(t: np.ndarray, count: int = 6) -> np.ndarray:
     marks = np.array([0.0, 20.0, 50.0, 100.0, 200.0, t[-1]])[:count]
     marks = marks[marks <= t[-1]]
     return np.unique(np.searchsorted(t, marks).clip(0, len(t) - 1))
+
+
+def _finish(fig: Any, cfg: ScenarioConfig, path: str | Path | None, title: str) -> Any:
+    """Title, layout and (if ``path``) save a figure."""
+    fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
+    fig.tight_layout()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path)
+    return fig
 
 
 def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None = None, title: str = "") -> Any:
@@ -125,12 +135,7 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
         ax.axhline(0.0, color="k", lw=0.5, alpha=0.5)
     for ax in (ax_path, ax_ct, ax_psi, ax_coord, ax_u):
         ax.grid(alpha=0.3)
-    fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
-    fig.tight_layout()
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path)
-    return fig
+    return _finish(fig, cfg, path, title)
 
 
 def plot_comparison(
@@ -178,9 +183,4 @@ def plot_comparison(
     axes[1, 0].set_ylabel("y_j − D_yj [m]")
     axes[2, 0].set_ylabel("θ_j − mean θ [m]")
     axes[3, 0].set_ylabel("u_j, u_cj (dotted) [m/s]")
-    fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
-    fig.tight_layout()
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path)
-    return fig
+    return _finish(fig, cfg, path, title)

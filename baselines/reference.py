@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.rollout import BatchPolicy
 from marine_formation_env.control import consensus_speed, los_angle, path_following_inputs
 from marine_formation_env.core import FormationCore, ObservationLayout
 from marine_formation_env.scenarios import ScenarioConfig
@@ -31,7 +32,7 @@ from marine_formation_env.scenarios import ScenarioConfig
 __all__ = ["ReferencePolicy"]
 
 
-class ReferencePolicy:
+class ReferencePolicy(BatchPolicy):
     """LOS path following (11)-(14) plus the nonlinear consensus law (20).
 
     Args:
@@ -84,14 +85,6 @@ class ReferencePolicy:
         cmd = self.commands(obs)
         keys = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
         return self._maps.normalized_actions(**{k: cmd[k] for k in keys[self.config.action_level]}).astype(np.float32)
-
-    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """Actions for a PettingZoo observation dict ``{agent: obs}``."""
-        agents = list(observations)
-        if not agents:
-            return {}
-        actions = self.act_batch(np.stack([observations[a] for a in agents]))
-        return {agent: actions[k] for k, agent in enumerate(agents)}
 
     def commanded_speed(self, observations: Mapping[str, np.ndarray]) -> dict[str, float]:
         """The consensus command u_c [m/s] each agent's observation implies."""

@@ -8,6 +8,7 @@ the ``force`` level, where the env never sees them.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -22,6 +23,26 @@ class Policy(Protocol):
     """What :func:`run_episode` needs of a policy."""
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]: ...
+
+
+class BatchPolicy:
+    """A policy defined on stacked observations: subclasses implement :meth:`act_batch`.
+
+    Every vessel acts from its own observation with the same function
+    (parameter sharing), so a PettingZoo dict is stacked, acted on, and split.
+    """
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Normalized actions ``(..., A)`` for observations ``(..., dim)``."""
+        raise NotImplementedError
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """Actions for a PettingZoo observation dict ``{agent: obs}``."""
+        agents = list(observations)
+        if not agents:
+            return {}
+        actions = self.act_batch(np.stack([observations[a] for a in agents]))
+        return {agent: actions[k] for k, agent in enumerate(agents)}
 
 
 @dataclass

@@ -79,6 +79,31 @@ def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0,
     return vessel_derivatives(p, psi, u, v, r, _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max), acc)
 
 
+@njit(cache=True, inline="always")
+def _stage(fixed, y, psi, u, v, r, k, step, t):  # type: ignore[no-untyped-def]
+    """The closed loop at the RK4 stage state ``(y, ψ, u, v, r) + step·k`` (x does not enter it)."""
+    level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max = fixed
+    return _derivative(
+        level,
+        p,
+        g,
+        printed,
+        d_y,
+        y + step * k[1],
+        psi + step * k[2],
+        u + step * k[3],
+        v + step * k[4],
+        r + step * k[5],
+        c0,
+        c1,
+        t,
+        uc0,
+        uc_dot,
+        tu_max,
+        tr_max,
+    )
+
+
 def _kernel(  # type: ignore[no-untyped-def]
     state,  # (B, N, 6) float64, updated in place
     cmd,  # (B, N, 2) physical commands: (τ_u, τ_r) | (u_c, ψ_d) | (u_c, 0)
@@ -132,65 +157,12 @@ def _kernel(  # type: ignore[no-untyped-def]
             d_y = offsets[j, 1]
             for k in range(substeps):
                 t = k * h
-                k1 = _derivative(level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max)
                 hh = 0.5 * h
-                k2 = _derivative(
-                    level,
-                    p,
-                    g,
-                    printed,
-                    d_y,
-                    y + hh * k1[1],
-                    psi + hh * k1[2],
-                    u + hh * k1[3],
-                    v + hh * k1[4],
-                    r + hh * k1[5],
-                    c0,
-                    c1,
-                    t + hh,
-                    uc0,
-                    uc_dot,
-                    tu_max,
-                    tr_max,
-                )
-                k3 = _derivative(
-                    level,
-                    p,
-                    g,
-                    printed,
-                    d_y,
-                    y + hh * k2[1],
-                    psi + hh * k2[2],
-                    u + hh * k2[3],
-                    v + hh * k2[4],
-                    r + hh * k2[5],
-                    c0,
-                    c1,
-                    t + hh,
-                    uc0,
-                    uc_dot,
-                    tu_max,
-                    tr_max,
-                )
-                k4 = _derivative(
-                    level,
-                    p,
-                    g,
-                    printed,
-                    d_y,
-                    y + h * k3[1],
-                    psi + h * k3[2],
-                    u + h * k3[3],
-                    v + h * k3[4],
-                    r + h * k3[5],
-                    c0,
-                    c1,
-                    t + h,
-                    uc0,
-                    uc_dot,
-                    tu_max,
-                    tr_max,
-                )
+                fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max)
+                k1 = _derivative(level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max)
+                k2 = _stage(fixed, y, psi, u, v, r, k1, hh, t + hh)
+                k3 = _stage(fixed, y, psi, u, v, r, k2, hh, t + hh)
+                k4 = _stage(fixed, y, psi, u, v, r, k3, h, t + h)
                 w = h / 6.0
                 x = x + w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
                 y = y + w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])

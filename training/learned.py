@@ -11,20 +11,20 @@ acts from its own masked observation with the shared network.
 from __future__ import annotations
 
 import pickle
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
+from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from training.config import algo_class
 
 __all__ = ["ModelPolicy", "load_learned_policy", "run_folder_of"]
 
 
-class ModelPolicy:
+class ModelPolicy(BatchPolicy):
     """A shared SB3 policy acting for every vessel.
 
     Args:
@@ -45,13 +45,6 @@ class ModelPolicy:
             flat = self.normalizer.normalize_obs(flat)
         actions, _ = self.model.predict(flat, deterministic=self.deterministic)
         return np.asarray(actions, dtype=np.float32).reshape(*obs.shape[:-1], -1)
-
-    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        agents = list(observations)
-        if not agents:
-            return {}
-        actions = self.act_batch(np.stack([observations[a] for a in agents]))
-        return {agent: actions[k] for k, agent in enumerate(agents)}
 
 
 def run_folder_of(path: str | Path) -> Path:
