@@ -23,7 +23,7 @@ CONFIG = Path(__file__).resolve().parents[1] / "training" / "configs" / "paper_s
 @pytest.mark.slow
 def test_ppo_speed_level_learns_most_of_the_way_to_the_reference(tmp_path: Path) -> None:
     resolved = validate(
-        apply_overrides(load_config(CONFIG), {"n_timesteps": 600_000, "eval_freq": 0, "checkpoint_freq": 0})
+        apply_overrides(load_config(CONFIG), {"n_timesteps": 1_500_000, "eval_freq": 0, "checkpoint_freq": 0})
     )
     model = train(resolved, tmp_path / "run", seed=0, progress=False)
     env = parallel_env(resolved["scenario"], **resolved["env_kwargs"])
@@ -36,6 +36,7 @@ def test_ppo_speed_level_learns_most_of_the_way_to_the_reference(tmp_path: Path)
         }.items()
     }
     normalized = (returns["learned"] - returns["random"]) / (returns["reference"] - returns["random"])
-    # The 15-minute benchmark reaches 1.05; after 0.6 M vessel-steps the policy must
+    # The 15-minute benchmark reaches 1.05 (0.86 after 1.5 M vessel-steps in a 4-minute run;
+    # 0.50 after 0.6 M). After 1.5 M vessel-steps the policy must
     # already have closed most of the gap between random and the paper's controller.
-    assert normalized > 0.5, returns
+    assert normalized > 0.6, returns
