@@ -8,14 +8,14 @@ import pytest
 
 pytest.importorskip("stable_baselines3")
 
-from baselines.metrics import summarize  # noqa: E402
-from baselines.reference import ReferencePolicy  # noqa: E402
-from baselines.rollout import RandomPolicy  # noqa: E402
-from marine_formation_env.env import parallel_env  # noqa: E402
-from training.callbacks import EVAL_SEED, evaluate_policy_episodes  # noqa: E402
-from training.config import apply_overrides, load_config, validate  # noqa: E402
-from training.learned import ModelPolicy  # noqa: E402
-from training.train import train  # noqa: E402
+from baselines.metrics import summarize
+from baselines.reference import ReferencePolicy
+from baselines.rollout import RandomPolicy
+from marine_formation_env.env import parallel_env
+from training.callbacks import EVAL_SEED, evaluate_policy_episodes
+from training.config import apply_overrides, load_config, validate
+from training.learned import ModelPolicy
+from training.train import train
 
 CONFIG = Path(__file__).resolve().parents[1] / "training" / "configs" / "paper_speed_ppo.yaml"
 
