@@ -26,7 +26,7 @@ import numpy as np
 
 from baselines.rollout import BatchPolicy
 from marine_formation_env.control import consensus_speed, los_angle, path_following_inputs
-from marine_formation_env.core import FormationCore, ObservationLayout
+from marine_formation_env.core import ObservationLayout, normalized_actions
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["ReferencePolicy"]
@@ -51,8 +51,6 @@ class ReferencePolicy(BatchPolicy):
             )
         self.config = config
         self.layout = ObservationLayout(config.n_vessels)
-        # Used only for its action maps (no state is read from it).
-        self._maps = FormationCore(config, num_envs=1)
 
     def commands(self, obs: np.ndarray) -> dict[str, np.ndarray]:
         """Physical commands for observations ``(..., obs_dim)``.
@@ -84,7 +82,8 @@ class ReferencePolicy(BatchPolicy):
         """Normalized actions ``(..., A)`` for observations ``(..., obs_dim)``."""
         cmd = self.commands(obs)
         keys = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
-        return self._maps.normalized_actions(**{k: cmd[k] for k in keys[self.config.action_level]}).astype(np.float32)
+        chosen = {k: cmd[k] for k in keys[self.config.action_level]}
+        return normalized_actions(self.config, **chosen).astype(np.float32)
 
     def commanded_speed(self, observations: Mapping[str, np.ndarray]) -> dict[str, float]:
         """The consensus command u_c [m/s] each agent's observation implies."""

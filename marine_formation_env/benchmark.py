@@ -184,13 +184,13 @@ def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
     vessel ODE and, below the ``force`` level, the inner controllers), for
     one formation of three vessels, divided by three.
     """
-    from marine_formation_env.core import FormationCore
+    from marine_formation_env.core import FormationCore, physical_commands
     from marine_formation_env.dynamics import rk4_step
     from marine_formation_env.scenarios import make_config
 
     core = FormationCore(make_config("paper", action_level=level), num_envs=1)
     core.reset(core.config.initial_state)
-    commands = core.physical_commands(np.zeros((1, 3, core.action_dim)))
+    commands = physical_commands(core.config, np.zeros((1, 3, core.action_dim)))
     rhs = core._closed_loop(commands)
     state: np.ndarray = core.state.view(_Counter)
     h = core.config.dt / core.config.substeps

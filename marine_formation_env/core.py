@@ -110,6 +110,38 @@ class StepOutput:
     out_of_bounds: np.ndarray
 
 
+def physical_commands(config: ScenarioConfig, actions: np.ndarray) -> dict[str, np.ndarray]:
+    """Map normalized actions ``(..., A)`` (clipped to [−1, 1]) to the level's physical commands.
+
+    * ``force``: ``τ_u = a₀·tau_u_max`` [m/s²], ``τ_r = a₁·tau_r_max`` [rad/s²].
+    * ``guidance``: ``u_c = U_min + (a₀+1)/2·(U_max−U_min)`` [m/s], ``ψ_d = a₁·psi_max`` [rad].
+    * ``speed``: ``u_c`` as above.
+    """
+    return _map_actions(config, np.clip(actions, -1.0, 1.0))
+
+
+def _map_actions(cfg: ScenarioConfig, a: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`physical_commands` of actions already inside [−1, 1]."""
+    if cfg.action_level == "force":
+        return {"tau_u": a[..., 0] * cfg.tau_u_max, "tau_r": a[..., 1] * cfg.tau_r_max}
+    u_c = cfg.u_min + 0.5 * (a[..., 0] + 1.0) * (cfg.u_max - cfg.u_min)
+    if cfg.action_level == "guidance":
+        return {"u_c": u_c, "psi_d": a[..., 1] * cfg.psi_max}
+    return {"u_c": u_c}
+
+
+def normalized_actions(config: ScenarioConfig, **commands: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`physical_commands` (clipped to [−1, 1]), shape ``(..., A)``."""
+    cfg = config
+    if cfg.action_level == "force":
+        cols = [commands["tau_u"] / cfg.tau_u_max, commands["tau_r"] / cfg.tau_r_max]
+    else:
+        cols = [2.0 * (np.asarray(commands["u_c"]) - cfg.u_min) / (cfg.u_max - cfg.u_min) - 1.0]
+        if cfg.action_level == "guidance":
+            cols.append(np.asarray(commands["psi_d"]) / cfg.psi_max)
+    return np.clip(np.stack(np.broadcast_arrays(*cols), axis=-1), -1.0, 1.0)
+
+
 BACKENDS = ("auto", "numpy", "numba")
 
 
@@ -237,8 +269,8 @@ class FormationCore:
         high = np.array(own_high + slot_high * (self.n - 1), dtype=np.float32)
         return low, high
 
-    def observation_space(self) -> spaces.Box:
-        """One vessel's observation space.
+    def observation_space(self, joint: bool = False) -> spaces.Box:
+        """One vessel's observation space (``joint``: the N vessels' concatenated).
 
         Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|;
         ψ in [−π, π]; u, v in ±max_speed; r in ±max_yaw_rate; u_d in
@@ -249,7 +281,14 @@ class FormationCore:
         envelope terminates, so only its last observation can reach past the
         bounds, and it is clipped to them.
         """
+        if joint:
+            return spaces.Box(np.tile(self.obs_low, self.n), np.tile(self.obs_high, self.n), dtype=np.float32)
         return spaces.Box(self.obs_low, self.obs_high, dtype=np.float32)
+
+    def action_space(self, joint: bool = False) -> spaces.Box:
+        """One vessel's action space ``Box(-1, 1, (A,))`` (``joint``: ``(N·A,)``)."""
+        size = self.n * self.action_dim if joint else self.action_dim
+        return spaces.Box(-1.0, 1.0, (size,), dtype=np.float32)
 
     # ------------------------------------------------------------------ reset
     def sample_initial_state(self, rng: np.random.Generator) -> np.ndarray:
@@ -300,33 +339,6 @@ class FormationCore:
         return self.observe(ids)
 
     # ------------------------------------------------------------------- step
-    def physical_commands(self, actions: np.ndarray) -> dict[str, np.ndarray]:
-        """Map normalized actions ``(..., A)`` in [−1, 1] (clipped) to physical commands.
-
-        * ``force``: ``τ_u = a₀·tau_u_max`` [m/s²], ``τ_r = a₁·tau_r_max`` [rad/s²].
-        * ``guidance``: ``u_c = U_min + (a₀+1)/2·(U_max−U_min)`` [m/s], ``ψ_d = a₁·psi_max`` [rad].
-        * ``speed``: ``u_c`` as above.
-        """
-        cfg = self.config
-        a = np.clip(actions, -1.0, 1.0)
-        if cfg.action_level == "force":
-            return {"tau_u": a[..., 0] * cfg.tau_u_max, "tau_r": a[..., 1] * cfg.tau_r_max}
-        u_c = cfg.u_min + 0.5 * (a[..., 0] + 1.0) * (cfg.u_max - cfg.u_min)
-        if cfg.action_level == "guidance":
-            return {"u_c": u_c, "psi_d": a[..., 1] * cfg.psi_max}
-        return {"u_c": u_c}
-
-    def normalized_actions(self, **commands: np.ndarray) -> np.ndarray:
-        """Inverse of :meth:`physical_commands` (clipped to [−1, 1]), shape ``(..., A)``."""
-        cfg = self.config
-        if cfg.action_level == "force":
-            cols = [commands["tau_u"] / cfg.tau_u_max, commands["tau_r"] / cfg.tau_r_max]
-        else:
-            cols = [2.0 * (np.asarray(commands["u_c"]) - cfg.u_min) / (cfg.u_max - cfg.u_min) - 1.0]
-            if cfg.action_level == "guidance":
-                cols.append(np.asarray(commands["psi_d"]) / cfg.psi_max)
-        return np.clip(np.stack(np.broadcast_arrays(*cols), axis=-1), -1.0, 1.0)
-
     def step(self, actions: np.ndarray) -> StepOutput:
         """Advance every formation by one control period.
 
@@ -347,13 +359,13 @@ class FormationCore:
         if not np.all(np.isfinite(actions)):
             bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
-        commands = self.physical_commands(actions)
+        clipped = np.clip(actions, -1.0, 1.0)
+        commands = _map_actions(cfg, clipped)
         if self._fresh.any():
             fresh = self._fresh
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
             self._fresh[:] = False
-        clipped = np.clip(actions, -1.0, 1.0)
         if self._kernel_args is not None:
             out = self._step_compiled(clipped, commands)
         else:

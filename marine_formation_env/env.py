@@ -11,6 +11,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
@@ -174,8 +175,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     def __init__(
         self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.config: ScenarioConfig = make_config(scenario, **overrides)
         self.render_mode = render_mode
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
@@ -184,10 +184,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self.agents: list[str] = []
         self._index = {agent: j for j, agent in enumerate(self.possible_agents)}
         self._observation_space = self.core.observation_space()
-        self._action_space = spaces.Box(-1.0, 1.0, (self.config.action_dim,), dtype=np.float32)
+        self._action_space = self.core.action_space()
         self.state_space = spaces.Box(-np.inf, np.inf, (n * 6 + 1,), dtype=np.float32)
         self.np_random, self.np_random_seed = seeding.np_random(None)
-        self._last: StepOutput | None = None
         self._renderer: Any = None
         self._started = False
 
@@ -228,7 +227,6 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             initial = self.core.sample_initial_state(self.np_random)
         obs = self.core.reset(initial)[0]
         self.agents = list(self.possible_agents)
-        self._last = None
         self._started = True
         if self.render_mode == "human":
             self.render()
@@ -256,7 +254,6 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         batch = self._action_batch(actions)
         out = self.core.step(batch)
-        self._last = out
         obs = self._per_agent(out.observation[0])
         rewards = {agent: float(out.reward[0, self._index[agent]]) for agent in self.agents}
         term, trunc = bool(out.terminated[0]), bool(out.truncated[0])

@@ -27,9 +27,9 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from marine_formation_env.core import FormationCore
+from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 from marine_formation_env.vector import joint_info
 
@@ -49,15 +49,12 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
     def __init__(
         self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.config: ScenarioConfig = make_config(scenario, **overrides)
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         self.render_mode = render_mode
-        n, a = self.config.n_vessels, self.config.action_dim
-        block = self.core.observation_space()
-        self.observation_space = spaces.Box(np.tile(block.low, n), np.tile(block.high, n), dtype=np.float32)
-        self.action_space = spaces.Box(-1.0, 1.0, (n * a,), dtype=np.float32)
+        self.observation_space = self.core.observation_space(joint=True)
+        self.action_space = self.core.action_space(joint=True)
         self._renderer: Any = None
         self._done = True
 

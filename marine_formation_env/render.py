@@ -11,6 +11,7 @@ A fixed world camera shows the scenario's workspace box with:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,12 @@ from marine_formation_env.scenarios import ScenarioConfig
 __all__ = ["VESSEL_COLORS", "FormationRenderer", "hull_polygon", "require_matplotlib"]
 
 VESSEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
+
+
+def check_render_mode(render_mode: str | None, modes: Sequence[str]) -> None:
+    """Raise ValueError for a render mode outside ``modes`` (None means no rendering)."""
+    if render_mode is not None and render_mode not in modes:
+        raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {list(modes)}")
 
 
 def require_matplotlib() -> Any:

@@ -36,12 +36,12 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv", "joint_info"]
@@ -95,8 +95,7 @@ class MarineFormationVectorEnv(VectorEnv):
         mode = AutoresetMode(autoreset_mode)
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {mode!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {self.metadata['render_modes']}")
+        check_render_mode(render_mode, self.metadata["render_modes"])
         self.config: ScenarioConfig = make_config(scenario, **overrides)
         self.core = FormationCore(self.config, num_envs=num_envs, backend=backend)
         self.num_formations = self.core.num_envs
@@ -105,19 +104,10 @@ class MarineFormationVectorEnv(VectorEnv):
         self.autoreset_mode = mode
         self.metadata = {**type(self).metadata, "autoreset_mode": mode}
         self.render_mode = render_mode
-        b, n, a = self.num_formations, self.n_vessels, self.config.action_dim
-        agent_obs = self.core.observation_space()
-        agent_act = spaces.Box(-1.0, 1.0, (a,), dtype=np.float32)
-        if layout == "joint":
-            self.num_envs = b
-            self.single_observation_space = spaces.Box(
-                np.tile(agent_obs.low, n), np.tile(agent_obs.high, n), dtype=np.float32
-            )
-            self.single_action_space = spaces.Box(-1.0, 1.0, (n * a,), dtype=np.float32)
-        else:
-            self.num_envs = b * n
-            self.single_observation_space = agent_obs
-            self.single_action_space = agent_act
+        b, joint = self.num_formations, layout == "joint"
+        self.num_envs = b if joint else b * self.n_vessels
+        self.single_observation_space = self.core.observation_space(joint)
+        self.single_action_space = self.core.action_space(joint)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(b)]
