@@ -32,6 +32,7 @@ GainsT = namedtuple("GainsT", "k_u k_psi k_r delta a")
 
 for _fn in (
     dynamics.accelerations,
+    dynamics.current_velocity,
     dynamics.vessel_derivatives,
     dynamics.wrap_angle,
     control.saturation,
@@ -46,6 +47,7 @@ for _fn in (
     register_jitable(_fn)
 
 accelerations = dynamics.accelerations
+current_velocity = dynamics.current_velocity
 vessel_derivatives = dynamics.vessel_derivatives
 wrap_angle = dynamics.wrap_angle
 path_following_inputs = control.path_following_inputs
@@ -67,22 +69,28 @@ def _clip(x: float, lo: float, hi: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0, u_c_dot, tu_max, tr_max):  # type: ignore[no-untyped-def]
-    """The closed loop of one vessel (the numpy path's ``FormationCore._closed_loop``)."""
+def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea):  # type: ignore[no-untyped-def]
+    """The closed loop of one vessel (the numpy path's ``FormationCore._closed_loop``).
+
+    ``sea = (t0, speed, amplitude, ω, cos β, sin β)``: the period's start time and the current.
+    """
+    t0, c_speed, c_amp, c_omega, c_cos, c_sin = sea
+    vc_x, vc_y = current_velocity(c_speed, c_amp, c_omega, c_cos, c_sin, t0 + t)
     if level == 0:
-        return vessel_derivatives(p, psi, u, v, r, cmd0, cmd1)
+        return vessel_derivatives(p, psi, u, v, r, cmd0, cmd1, None, vc_x, vc_y)
     acc = accelerations(p, u, v, r)
     if level == 1:
         tau_u, tau_r = heading_tracking_inputs(p, g, psi, u, v, r, u_c0 + u_c_dot * t, cmd1, printed, acc, u_c_dot)
     else:
         tau_u, tau_r = path_following_inputs(p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
-    return vessel_derivatives(p, psi, u, v, r, _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max), acc)
+    tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)
+    return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, vc_x, vc_y)
 
 
 @njit(cache=True, inline="always")
 def _stage(fixed, y, psi, u, v, r, k, step, t):  # type: ignore[no-untyped-def]
     """The closed loop at the RK4 stage state ``(y, ψ, u, v, r) + step·k`` (x does not enter it)."""
-    level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max = fixed
+    level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max, sea = fixed
     return _derivative(
         level,
         p,
@@ -101,6 +109,7 @@ def _stage(fixed, y, psi, u, v, r, k, step, t):  # type: ignore[no-untyped-def]
         uc_dot,
         tu_max,
         tr_max,
+        sea,
     )
 
 
@@ -116,6 +125,8 @@ def _kernel(  # type: ignore[no-untyped-def]
     substeps,
     tu_max,
     tr_max,
+    current,  # (speed, amplitude, ω, cos β, sin β) of the ocean current
+    time0,  # (B,) time at the start of the period
     offsets,  # (N, 2)
     slot_index,  # (N, N-1)
     slot_mask,  # (N, N-1) float
@@ -155,11 +166,14 @@ def _kernel(  # type: ignore[no-untyped-def]
             c0, c1, uc0 = cmd[b, j, 0], cmd[b, j, 1], u_c0[b, j]
             uc_dot = (c0 - uc0) / dt
             d_y = offsets[j, 1]
+            sea = (time0[b], current[0], current[1], current[2], current[3], current[4])
             for k in range(substeps):
                 t = k * h
                 hh = 0.5 * h
-                fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max)
-                k1 = _derivative(level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max)
+                fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max, sea)
+                k1 = _derivative(
+                    level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max, sea
+                )
                 k2 = _stage(fixed, y, psi, u, v, r, k1, hh, t + hh)
                 k3 = _stage(fixed, y, psi, u, v, r, k2, hh, t + hh)
                 k4 = _stage(fixed, y, psi, u, v, r, k3, h, t + h)

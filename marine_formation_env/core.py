@@ -27,6 +27,14 @@ Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, SPEC §7)::
 
 Slots are ordered relative to ``j`` so that one shared policy sees "the next
 vessel", "the one after" and so on in the same place for every vessel.
+
+With a non-ideal channel, switching topologies or sensor noise
+(``not config.ideal_observations``), a :class:`~marine_formation_env.channel.LinkChannel`
+sits between the vessels: the slots then hold the last message received from
+``i`` (its θ_i and ẋ_i at sending, compared with j's own values now) and its
+age, and the link bit is 1 iff the link exists now and has delivered a
+message (module :mod:`marine_formation_env.channel`). With a current, ``u`` and
+``v`` are velocities through the water and ẋ in the messages is inertial.
 """
 
 from __future__ import annotations
@@ -40,8 +48,21 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from marine_formation_env.channel import LinkChannel, channel_generator
 from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
-from marine_formation_env.dynamics import PSI, R, U, V, X, Y, accelerations, rk4_step, vessel_rhs, wrap_angle
+from marine_formation_env.dynamics import (
+    PSI,
+    R,
+    U,
+    V,
+    X,
+    Y,
+    accelerations,
+    current_velocity,
+    rk4_step,
+    vessel_rhs,
+    wrap_angle,
+)
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -186,6 +207,8 @@ class FormationCore:
         state: ``(B, N, 6)`` float64, columns ``x, y, psi, u, v, r``.
         time: ``(B,)`` simulated time [s].
         steps: ``(B,)`` control periods since reset.
+        channel: the :class:`~marine_formation_env.channel.LinkChannel`
+            between the vessels, or None with the paper's ideal links.
     """
 
     def __init__(self, config: ScenarioConfig, num_envs: int = 1, backend: str = "auto") -> None:
@@ -211,6 +234,11 @@ class FormationCore:
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
         self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
+        self._current: tuple[float, float, float, float, float] | None = (
+            None if config.current.is_zero else config.current.coefficients
+        )
+        self.channel = None if config.ideal_observations else LinkChannel(config, self.num_envs)
+        self._measured: np.ndarray | None = None  # with sensor noise only
         self._kernel_args: tuple[Any, ...] | None = None
         if self.backend == "numba":
             from marine_formation_env import _numba
@@ -227,6 +255,9 @@ class FormationCore:
                 config.substeps,
                 config.tau_u_max,
                 config.tau_r_max,
+                np.array(config.current.coefficients),
+            )
+            self._kernel_geometry = (
                 np.ascontiguousarray(config.formation),
                 self._slot_index,
                 self._slot_mask,
@@ -244,6 +275,12 @@ class FormationCore:
                 config.max_speed,
                 config.max_yaw_rate,
             )
+
+    @property
+    def measured(self) -> np.ndarray:
+        """``(B, N, 6)``: what each vessel measured of itself at the last control
+        instant: the state plus sensor noise (the state itself without noise)."""
+        return self.state if self._measured is None else self._measured
 
     def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Per-agent observation bounds ``(low, high)`` (float32, see :meth:`observation_space`)."""
@@ -315,8 +352,27 @@ class FormationCore:
             return np.broadcast_to(self.config.initial_state, (len(rngs), self.n, 6)).copy()
         return np.stack([self.sample_initial_state(rng) for rng in rngs])
 
+    def seed_channel(self, seeds: Sequence[int | None], env_ids: np.ndarray | None = None) -> None:
+        """Seed the channel stream (loss, delays, failures, sensor noise) of formations ``env_ids``.
+
+        One seed per formation (all formations if ``env_ids`` is None); ``None``
+        keeps that formation's stream running. Call it before :meth:`reset`. A
+        no-op with the paper's ideal links, which draw nothing.
+        """
+        index = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
+        if len(seeds) != len(index):
+            raise ValueError(f"seed_channel needs {len(index)} seeds (one per formation), got {len(seeds)}")
+        if self.channel is None:
+            return
+        for b, seed in zip(index, seeds, strict=True):
+            if seed is not None:
+                self.channel.rngs[b] = channel_generator(seed)
+
     def reset(self, initial_state: np.ndarray, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
         """Set the state of formations ``env_ids`` (all if None) and return their observations.
+
+        The channel of those formations forgets every message and transmits
+        at once (control instant 0).
 
         Args:
             initial_state: ``(N, 6)`` or ``(len(env_ids), N, 6)`` finite array.
@@ -336,7 +392,23 @@ class FormationCore:
         self.time[ids] = 0.0
         self.steps[ids] = 0
         self._fresh[ids] = True  # the first command after a reset is held, not ramped
+        if self.channel is not None:
+            index = np.arange(self.num_envs)[ids]
+            self.channel.reset(index)
+            self._sense(index)
         return self.observe(ids)
+
+    def _sense(self, ids: np.ndarray) -> None:
+        """A control instant for the channel: measure (with noise), transmit, deliver."""
+        assert self.channel is not None
+        noise = self.channel.measurement_noise(ids)
+        if noise is not None:
+            if self._measured is None:
+                self._measured = self.state.copy()
+            self._measured[ids] = self.state[ids] + noise
+        s, time = self.measured[ids], self.time[ids]
+        theta, x_dot = self._along_track(s, time, inertial=True)
+        self.channel.update(ids, self.steps[ids], time, theta, x_dot, self.state[ids][..., :2])
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> StepOutput:
@@ -377,6 +449,8 @@ class FormationCore:
             self.state = state
             self.time = self.time + cfg.dt
             self.steps = self.steps + 1
+            if self.channel is not None:
+                self._sense(np.arange(self.num_envs))
             out = self._outputs(clipped, commands.get("u_c"))
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
@@ -393,6 +467,7 @@ class FormationCore:
             cmd[..., 0] = commands["u_c"]
             if cfg.action_level == "guidance":
                 cmd[..., 1] = commands["psi_d"]
+        time0 = self.time
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
         obs = np.empty((b, n, self.layout.dim), dtype=np.float32)
@@ -405,6 +480,8 @@ class FormationCore:
             cmd,
             self._last_u_c,
             *self._kernel_args,
+            time0,
+            *self._kernel_geometry,
             np.asarray(cfg.u_d.value(self.time), dtype=float),
             np.asarray(cfg.u_d.rate(self.time), dtype=float),
             cfg.horizon - self.time,
@@ -418,6 +495,9 @@ class FormationCore:
             np.empty((b, n)),
             np.empty((b, n)),
         )
+        if self.channel is not None:  # the kernel's slots are those of ideal links
+            self._sense(np.arange(b))
+            obs = self.observe()
         components = dict(zip(REWARD_COMPONENTS, comps, strict=True))
         terminated = flags[:, 0] | flags[:, 1]
         return StepOutput(
@@ -443,9 +523,10 @@ class FormationCore:
         """
         cfg = self.config
         p, gains, printed = cfg.params, cfg.gains, cfg.paper_as_printed
+        sea = self._current_at(self.time)
         if cfg.action_level == "force":
             tau_u, tau_r = commands["tau_u"], commands["tau_r"]
-            return lambda _t, s: vessel_rhs(p, s, tau_u, tau_r)
+            return lambda t, s: vessel_rhs(p, s, tau_u, tau_r, None, sea(t))
         clip, tu_max, tr_max = np.clip, cfg.tau_u_max, cfg.tau_r_max  # actuator limits apply at every level
         u_c0 = self._last_u_c
         u_c_dot = (commands["u_c"] - u_c0) / cfg.dt
@@ -458,7 +539,7 @@ class FormationCore:
                 tau_u, tau_r = heading_tracking_inputs(
                     p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d, printed, acc, u_c_dot
                 )
-                return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc)
+                return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc, sea(t))
 
             return rhs_guidance
         dy = self._dy
@@ -469,16 +550,32 @@ class FormationCore:
             tau_u, tau_r = path_following_inputs(
                 p, gains, s[..., Y] - dy, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
             )
-            return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc)
+            return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc, sea(t))
 
         return rhs_speed
 
     # ------------------------------------------------------------ observation
-    def _along_track(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """θ = x − D_x and ẋ of states ``s`` ``(b, N, 6)``."""
+    def _current_at(self, t0: np.ndarray) -> Callable[[float], tuple[Any, Any] | None]:
+        """The current ``(V_x, V_y)`` ``(B, 1)`` at ``t0 + t`` as a function of ``t`` (None: still water)."""
+        if self._current is None:
+            return lambda _t: None
+        speed, amplitude, omega, cos_dir, sin_dir = self._current
+        start = t0[:, None]
+        return lambda t: current_velocity(speed, amplitude, omega, cos_dir, sin_dir, start + t)
+
+    def _along_track(
+        self, s: np.ndarray, time: np.ndarray | None = None, inertial: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """θ = x − D_x and ẋ of states ``s`` ``(b, N, 6)``.
+
+        ẋ is through the water (``u cos ψ − v sin ψ``), or with ``inertial`` over
+        ground, adding the current's V_x at ``time`` ``(b,)``.
+        """
         psi, u, v = s[..., PSI], s[..., U], s[..., V]
         theta = s[..., X] - self._dx
         x_dot = u * np.cos(psi) - v * np.sin(psi)
+        if inertial and self._current is not None:
+            x_dot = x_dot + self._current_at(np.asarray(time))(0.0)[0]  # type: ignore[index]
         return theta, x_dot
 
     def observe(self, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
@@ -488,7 +585,7 @@ class FormationCore:
         """
         cfg = self.config
         ids = slice(None) if env_ids is None else env_ids
-        s, time = self.state[ids], self.time[ids]
+        s, time = self.measured[ids], self.time[ids]
         b, n = s.shape[0], self.n
         out = np.zeros((b, n, self.layout.dim), dtype=np.float32)
         out[..., 0] = s[..., Y] - self._dy
@@ -496,12 +593,17 @@ class FormationCore:
         out[..., 2:5] = s[..., U : R + 1]
         out[..., 5] = cfg.u_d.value(time)[:, None]
         out[..., 6] = cfg.u_d.rate(time)[:, None]
-        theta, x_dot = self._along_track(s)
-        idx = self._slot_index
         slots = out[..., self.layout.own :].reshape(b, n, n - 1, self.layout.slot)
-        slots[..., 0] = self._slot_mask
-        slots[..., 1] = self._slot_mask * (theta[:, :, None] - theta[:, idx])
-        slots[..., 2] = self._slot_mask * (x_dot[:, :, None] - x_dot[:, idx])
+        if self.channel is None:
+            theta, x_dot = self._along_track(s)
+            idx = self._slot_index
+            slots[..., 0] = self._slot_mask
+            slots[..., 1] = self._slot_mask * (theta[:, :, None] - theta[:, idx])
+            slots[..., 2] = self._slot_mask * (x_dot[:, :, None] - x_dot[:, idx])
+        else:
+            theta, x_dot = self._along_track(s, time, inertial=True)
+            for k, feature in enumerate(self.channel.slots(ids, self._slot_index, time, theta, x_dot)):
+                slots[..., k] = feature
         return np.clip(out, self.obs_low, self.obs_high, out=out)
 
     def global_state(self) -> np.ndarray:

@@ -21,7 +21,19 @@ import numpy as np
 
 from marine_formation_env.params import VesselParams
 
-__all__ = ["PSI", "R", "U", "V", "X", "Y", "accelerations", "rk4_step", "vessel_rhs", "wrap_angle"]
+__all__ = [
+    "PSI",
+    "R",
+    "U",
+    "V",
+    "X",
+    "Y",
+    "accelerations",
+    "current_velocity",
+    "rk4_step",
+    "vessel_rhs",
+    "wrap_angle",
+]
 
 #: Column indices of the state vector.
 X, Y, PSI, U, V, R = range(6)
@@ -62,6 +74,19 @@ def accelerations(
     return a_u, v_dot, a_r
 
 
+def current_velocity(speed: float, amplitude: float, omega: float, cos_dir: float, sin_dir: float, t: Any) -> Any:
+    """Inertial ocean-current velocity ``(V_x, V_y)`` [m/s] at time ``t`` [s].
+
+    ``V_c(t) = (speed + amplitude·sin(ω·t))·(cos β, sin β)``: a current of
+    fixed direction β (the direction it flows *towards*, from the x axis)
+    whose magnitude varies slowly around ``speed`` (``amplitude = 0``: the
+    constant current of Børhaug, Pavlov and Pettersen, CDC 2008).
+    Scalars or arrays (also compiled by the numba backend).
+    """
+    magnitude = speed + amplitude * np.sin(omega * t)
+    return magnitude * cos_dir, magnitude * sin_dir
+
+
 def vessel_derivatives(
     p: VesselParams,
     psi: Any,
@@ -71,15 +96,24 @@ def vessel_derivatives(
     tau_u: Any,
     tau_r: Any,
     acc: tuple[Any, Any, Any] | None = None,
+    vc_x: Any = 0.0,
+    vc_y: Any = 0.0,
 ) -> tuple[Any, Any, Any, Any, Any, Any]:
     """Eqs. (1)-(4) component by component: ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
+
+    With an ocean current ``(vc_x, vc_y)`` [m/s] (inertial frame), ``u, v`` are
+    the velocities *relative to the water* and the kinematics become
+    ``η̇ = R(ψ)·ν_r + V_c`` (Børhaug, Pavlov, Pettersen, CDC 2008). For an
+    irrotational constant current the kinetics in relative velocities are
+    exactly eqs. (2)-(4); for a slowly varying one the current's acceleration
+    is neglected. Without a current (the default) this is the paper's model.
 
     Works element-wise on scalars or arrays of one shape (it is also compiled
     by the optional numba backend, so it sticks to arithmetic and ufuncs).
     """
     c, s = np.cos(psi), np.sin(psi)
     a_u, v_dot, a_r = accelerations(p, u, v, r) if acc is None else acc
-    return u * c - v * s, u * s + v * c, r, a_u + tau_u, v_dot, a_r + tau_r
+    return u * c - v * s + vc_x, u * s + v * c + vc_y, r, a_u + tau_u, v_dot, a_r + tau_r
 
 
 def vessel_rhs(
@@ -88,6 +122,7 @@ def vessel_rhs(
     tau_u: np.ndarray,
     tau_r: np.ndarray,
     acc: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+    current: tuple[Any, Any] | None = None,
 ) -> np.ndarray:
     """Time derivative of ``state`` (shape ``(..., 6)``) under inputs τ_u, τ_r (eqs. 1-4).
 
@@ -97,12 +132,17 @@ def vessel_rhs(
         tau_u: surge acceleration input [m/s²], shape ``state.shape[:-1]``.
         tau_r: yaw acceleration input [rad/s²], shape ``state.shape[:-1]``.
         acc: :func:`accelerations` of this state, if already computed.
+        current: inertial current velocity ``(V_x, V_y)`` [m/s], broadcastable
+            to ``state.shape[:-1]`` (see :func:`vessel_derivatives`); None: still water.
 
     Returns:
         ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
     """
     out = np.empty_like(state)
-    derivs = vessel_derivatives(p, state[..., PSI], state[..., U], state[..., V], state[..., R], tau_u, tau_r, acc)
+    vc_x, vc_y = (0.0, 0.0) if current is None else current
+    derivs = vessel_derivatives(
+        p, state[..., PSI], state[..., U], state[..., V], state[..., R], tau_u, tau_r, acc, vc_x, vc_y
+    )
     for k, value in enumerate(derivs):
         out[..., k] = value
     return out

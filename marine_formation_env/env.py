@@ -16,7 +16,7 @@ from marine_formation_env.scenarios import ScenarioConfig, make_config
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
 
-RESET_OPTIONS = ("initial_state",)
+RESET_OPTIONS = ("initial_state", "channel_seed")
 
 
 class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
@@ -212,9 +212,13 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         """Start an episode.
 
         Args:
-            seed: seeds the env's generator (initial-state noise).
+            seed: seeds the env's generator (initial-state noise) and, as a
+                separate stream, the channel's (loss, delays, link failures,
+                sensor noise).
             options: ``{"initial_state": (n, 6) array}`` sets the state exactly
-                (columns x, y, psi, u, v, r); other keys are ignored with a warning.
+                (columns x, y, psi, u, v, r); ``{"channel_seed": int}`` seeds
+                the channel stream on its own (to vary the channel's luck with
+                the same initial state); other keys are ignored with a warning.
         """
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(seed)
@@ -225,6 +229,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         initial = options.get("initial_state")
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
+        self.core.seed_channel([options.get("channel_seed", seed)])
         obs = self.core.reset(initial)[0]
         self.agents = list(self.possible_agents)
         self._started = True

@@ -59,11 +59,17 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._done = True
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
-        """Start an episode; ``options={"initial_state": (n, 6)}`` sets the state exactly."""
+        """Start an episode (seeding as :meth:`MarineFormationParallelEnv.reset`).
+
+        ``options={"initial_state": (n, 6)}`` sets the state exactly,
+        ``options={"channel_seed": int}`` seeds the channel stream on its own.
+        """
         super().reset(seed=seed)
-        initial = (options or {}).get("initial_state")
+        options = options or {}
+        initial = options.get("initial_state")
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
+        self.core.seed_channel([options.get("channel_seed", seed)])
         obs = self.core.reset(initial)[0].reshape(-1)
         self._done = False
         if self.render_mode == "human":

@@ -20,6 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from marine_formation_env.channel import ChannelConfig, GilbertElliott
+from marine_formation_env.disturbances import Current, SensorNoise
+from marine_formation_env.errors import ConfigError, check_number
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
 
@@ -57,10 +60,6 @@ FORMATIONS = ("paper", "v", "line_abreast", "column")
 
 ALONG_SPACING = 100.0  # [m] between rows of the generated formations
 ACROSS_SPACING = 50.0  # [m] between paths of the generated formations
-
-
-class ConfigError(ValueError):
-    """An invalid scenario configuration (names the offending value)."""
 
 
 def formation_offsets(pattern: str, n: int) -> np.ndarray:
@@ -213,6 +212,11 @@ class ScenarioConfig:
         topology: communication graph: a preset name (:func:`make_graph`), a
             :class:`CommGraph`, or an ``(n, n)`` adjacency matrix
             (``A[j, i] = 1`` iff i transmits to j).
+        topology_schedule: switching topologies: a sequence of ``(dwell [s],
+            graph)`` pairs (graphs as for ``topology``) that repeats
+            periodically; excludes ``topology``, which then becomes the union
+            of the scheduled graphs (the links that ever exist). Needs
+            reachability of the union only (joint connectivity).
         topology_seed: seed of the ``random`` topology preset.
         allow_unreachable: accept a graph without a globally reachable node
             (consensus then is not guaranteed).
@@ -238,6 +242,14 @@ class ScenarioConfig:
             terminates (the model is not meant for it). Must exceed u_max.
         max_yaw_rate: envelope of |r| [rad/s]; beyond it the formation terminates.
         reward: reward weights and scales.
+        channel: the communication channel (:class:`ChannelConfig`, or a
+            mapping of its fields): loss, latency, update rate, TDMA, range,
+            random link failures. The default is the paper's ideal links.
+        current: an ocean current (:class:`Current` or a mapping); its speed
+            plus amplitude must stay below u_min, or a vessel at the slowest
+            allowed speed could not hold its path.
+        sensor_noise: noise on each vessel's measurement of itself
+            (:class:`SensorNoise` or a mapping).
     """
 
     name: str = "custom"
@@ -266,6 +278,10 @@ class ScenarioConfig:
     max_speed: float = 14.0
     max_yaw_rate: float = 1.0
     reward: Any = field(default_factory=RewardConfig)
+    channel: Any = field(default_factory=ChannelConfig)
+    current: Any = field(default_factory=Current)
+    sensor_noise: Any = field(default_factory=SensorNoise)
+    topology_schedule: Any = ()
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)
@@ -288,18 +304,20 @@ class ScenarioConfig:
             raise ConfigError(f"formation offsets must be distinct, got {offsets.tolist()}")
         set_("formation", _readonly(offsets))
 
-        # communication graph
-        try:
-            if isinstance(self.topology, CommGraph):
-                graph = self.topology
-            elif isinstance(self.topology, str):
-                graph = make_graph(self.topology, n, seed=self.topology_seed)
-            else:
-                graph = CommGraph.from_adjacency(self.topology)
-        except GraphError as err:
-            raise ConfigError(str(err)) from None
-        if graph.n != n:
-            raise ConfigError(f"topology has {graph.n} vessels but n_vessels = {n}")
+        # communication graph(s)
+        schedule = self._resolve_schedule()
+        if schedule:
+            if self.topology is not None:
+                raise ConfigError(
+                    f"give either topology ({self.topology!r}) or topology_schedule, not both: with a schedule the "
+                    "links come from the scheduled graphs"
+                )
+            union = np.logical_or.reduce([g.adjacency for _, g in schedule])
+            graph = CommGraph(union, name="union of topology_schedule")
+        elif self.topology is None:
+            raise ConfigError("topology must be a preset name, a CommGraph or an (n, n) adjacency matrix, got None")
+        else:
+            graph = self._resolve_graph(self.topology, "topology")
         if not self.allow_unreachable:
             try:
                 graph.require_globally_reachable()
@@ -411,7 +429,60 @@ class ScenarioConfig:
                 raise ConfigError(f"workspace (x_min, x_max, y_min, y_max) must have min < max, got {box}")
         set_("workspace", box)
 
+        # the sea and the channel (our extensions)
+        for key, cls in (("channel", ChannelConfig), ("current", Current), ("sensor_noise", SensorNoise)):
+            value = getattr(self, key)
+            if not isinstance(value, cls):
+                if not isinstance(value, Mapping):
+                    raise ConfigError(f"{key} must be a {cls.__name__} or a mapping of its fields, got {value!r}")
+                set_(key, _build(cls, dict(value), key))
+        self.channel.validate_timing(self.dt)
+        strongest = self.current.speed + self.current.amplitude
+        if strongest >= self.u_min:
+            raise ConfigError(
+                f"current speed + amplitude = {strongest:g} m/s must stay below u_min = {self.u_min:g} m/s: a vessel "
+                "at the slowest allowed speed could not hold its path against it"
+            )
+
+    def _resolve_graph(self, spec: Any, name: str) -> CommGraph:
+        n = self.n_vessels
+        try:
+            if isinstance(spec, CommGraph):
+                graph = spec
+            elif isinstance(spec, str):
+                graph = make_graph(spec, n, seed=self.topology_seed)
+            else:
+                graph = CommGraph.from_adjacency(spec)
+        except GraphError as err:
+            raise ConfigError(f"{name}: {err}") from None
+        if graph.n != n:
+            raise ConfigError(f"{name} has {graph.n} vessels but n_vessels = {n}")
+        return graph
+
+    def _resolve_schedule(self) -> tuple[tuple[float, CommGraph], ...]:
+        raw = self.topology_schedule
+        if raw is None or (isinstance(raw, (tuple, list)) and len(raw) == 0):
+            object.__setattr__(self, "topology_schedule", ())
+            return ()
+        if isinstance(raw, (str, Mapping)) or not isinstance(raw, (tuple, list)):
+            raise ConfigError(f"topology_schedule must be a sequence of (dwell_seconds, graph) pairs, got {raw!r}")
+        out = []
+        for k, entry in enumerate(raw):
+            if not isinstance(entry, (tuple, list)) or len(entry) != 2:
+                raise ConfigError(f"topology_schedule[{k}] must be a (dwell_seconds, graph) pair, got {entry!r}")
+            dwell, spec = entry
+            check_number(f"topology_schedule[{k}]", "dwell [s]", dwell, strict=True)
+            out.append((float(dwell), self._resolve_graph(spec, f"topology_schedule[{k}]")))
+        schedule = tuple(out)
+        object.__setattr__(self, "topology_schedule", schedule)
+        return schedule
+
     # --------------------------------------------------------------- derived
+    @property
+    def ideal_observations(self) -> bool:
+        """Ideal links, one fixed graph and noise-free measurements: the paper's information."""
+        return self.channel.is_ideal and not self.topology_schedule and self.sensor_noise.is_zero
+
     @property
     def graph(self) -> CommGraph:
         """The resolved communication graph."""
@@ -433,12 +504,14 @@ class ScenarioConfig:
         return 1 if self.action_level == "speed" else 2
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-friendly description (resolved values)."""
+        """A JSON-friendly description (resolved values; an infinite number is the string ``"inf"``)."""
         out: dict[str, Any] = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if isinstance(value, CommGraph):
                 value = {"name": value.name, "links": value.links}
+            elif f.name == "topology_schedule":
+                value = [{"dwell": dwell, "name": g.name, "links": g.links} for dwell, g in value]
             elif isinstance(value, VesselParams):
                 value = dataclasses.asdict(value)
             elif dataclasses.is_dataclass(value) and not isinstance(value, type):
@@ -447,8 +520,19 @@ class ScenarioConfig:
                 value = value.tolist()
             elif isinstance(value, tuple):
                 value = list(value)
-            out[f.name] = value
+            out[f.name] = _finite_json(value)
         return out
+
+
+def _finite_json(value: Any) -> Any:
+    """``value`` with every infinite float replaced by ``"inf"``/``"-inf"`` (strict JSON has no infinity)."""
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_json(v) for v in value]
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return value
 
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
@@ -481,19 +565,53 @@ def _build(cls: type, values: Mapping[str, Any], name: str) -> Any:
         raise ConfigError(str(err)) from None
 
 
-#: Named scenarios: defaults that :func:`make_config` starts from.
+#: The paper's scenario (SPEC §5).
+_PAPER: dict[str, Any] = {
+    "name": "paper",
+    "n_vessels": 3,
+    "formation": "paper",
+    "topology": "paper",
+    "initial_state": PAPER_INITIAL_STATE,
+    # The SPEC §5 initial state makes vessel_0 and vessel_1 cross paths: under
+    # the paper's controller they pass 0.5-0.7 m apart (as point masses). The
+    # paper does not model collisions, so the check is off in this scenario.
+    "safety_distance": 0.0,
+}
+
+#: Named scenarios: defaults that :func:`make_config` starts from. Besides the
+#: paper's own, three presets put its scenario into the sea the paper is
+#: motivated by (numbers and reasons in the README, "Beyond the paper"):
+#:
+#: * ``acoustic``: underwater acoustic modems. One shared channel in TDMA with
+#:   4 s slots (a short acoustic frame at tens to hundreds of bit/s takes
+#:   seconds), so each vessel updates every 12 s; 1-2 s from sending to
+#:   arrival (frame duration plus sound at ~1500 m/s, decoding); bursty loss
+#:   (Gilbert–Elliott, 20 % of messages lost on average, bad spells of about
+#:   3 messages); 2 km range.
+#: * ``radio``: surface radio. One shared channel in TDMA with 0.5 s slots
+#:   (each vessel updates every 1.5 s), 5 % independent loss, 50 ms latency
+#:   (delivered at the next control instant, as a message never arrives
+#:   before it could), 5 km range.
+#: * ``current``: a 0.5 m/s cross current (towards +y), constant, over ideal links.
 SCENARIOS: dict[str, dict[str, Any]] = {
-    "paper": {
-        "name": "paper",
-        "n_vessels": 3,
-        "formation": "paper",
-        "topology": "paper",
-        "initial_state": PAPER_INITIAL_STATE,
-        # The SPEC §5 initial state makes vessel_0 and vessel_1 cross paths: under
-        # the paper's controller they pass 0.5-0.7 m apart (as point masses). The
-        # paper does not model collisions, so the check is off in this scenario.
-        "safety_distance": 0.0,
+    "paper": _PAPER,
+    "acoustic": {
+        **_PAPER,
+        "name": "acoustic",
+        "channel": ChannelConfig(
+            burst=GilbertElliott(p_good_to_bad=0.1, p_bad_to_good=0.35, loss_good=0.05, loss_bad=0.75),
+            latency=1.0,
+            jitter=1.0,
+            tdma_slot=4.0,
+            range=2000.0,
+        ),
     },
+    "radio": {
+        **_PAPER,
+        "name": "radio",
+        "channel": ChannelConfig(loss=0.05, latency=0.05, tdma_slot=0.5, range=5000.0),
+    },
+    "current": {**_PAPER, "name": "current", "current": Current(speed=0.5, direction=math.pi / 2)},
 }
 
 #: Initial-state noise used when the formation is generated (n differs from the
@@ -509,6 +627,13 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
     and random initial states around its slots (:data:`GENERATED_INIT_NOISE`),
     with the default collision check (the ``paper`` scenario turns it off for
     its own initial state only).
+
+    A mapping given for a field that holds a dataclass (``channel``,
+    ``current``, ``sensor_noise``, ``gains``, ``reward``, ``init_noise``,
+    ``u_d``) updates the scenario's value field by field:
+    ``make_config("acoustic", channel={"latency": 3.0})`` keeps the rest of
+    the acoustic channel. Giving ``topology_schedule`` without ``topology``
+    replaces the scenario's fixed graph by the schedule.
 
     Raises:
         ConfigError: unknown scenario or key, or any invalid value.
@@ -530,5 +655,21 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
             base.setdefault("init_noise", GENERATED_INIT_NOISE)
             if isinstance(base["init_noise"], InitNoise) and base["init_noise"].is_zero:
                 base["init_noise"] = GENERATED_INIT_NOISE
-    base.update(overrides)
+    if overrides.get("topology_schedule") and "topology" not in overrides:
+        base["topology"] = None
+    defaults = {f.name: f for f in dataclasses.fields(ScenarioConfig)}
+    for key, value in overrides.items():
+        current = base.get(key)
+        factory = defaults[key].default_factory
+        if current is None and callable(factory):
+            current = factory()
+        if isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
+            merged = {f.name: getattr(current, f.name) for f in dataclasses.fields(current)}
+            unknown = sorted(set(value) - set(merged))
+            if unknown:
+                raise ConfigError(f"unknown {key} key(s) {unknown}; valid keys: {sorted(merged)}")
+            merged.update(value)
+            base[key] = merged
+        else:
+            base[key] = value
     return ScenarioConfig(**base)

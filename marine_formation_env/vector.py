@@ -122,22 +122,37 @@ class MarineFormationVectorEnv(VectorEnv):
         """Reset every formation.
 
         Args:
-            seed: an int (formation ``b`` gets ``seed + b``) or a list of B seeds.
-            options: ``{"initial_state": (N, 6) or (B, N, 6)}`` sets the states exactly.
+            seed: an int (formation ``b`` gets ``seed + b``) or a list of B
+                seeds; each seeds its formation's initial states and, as a
+                separate stream, its channel.
+            options: ``{"initial_state": (N, 6) or (B, N, 6)}`` sets the states
+                exactly; ``{"channel_seed": int or list}`` seeds the channel
+                streams on their own (``+ b`` per formation, like ``seed``).
         """
-        b = self.num_formations
-        if seed is not None:
-            seeds = [int(seed) + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
-            if len(seeds) != b:
-                raise ValueError(f"reset(seed=…) needs an int or a list of {b} seeds (one per formation), got {seed!r}")
-            self._rngs = [seeding.np_random(int(s))[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
-        initial = (options or {}).get("initial_state")
+        seeds = self._per_formation(seed, "seed")
+        self._rngs = [seeding.np_random(int(s))[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
+        options = options or {}
+        initial = options.get("initial_state")
         if initial is None:
             initial = self.core.sample_initial_states(self._rngs)
+        self.core.seed_channel(
+            self._per_formation(options["channel_seed"], "channel_seed") if "channel_seed" in options else seeds
+        )
         self.core.reset(initial)
         self._needs_reset[:] = False
         self._started = True
         return self._layout_obs(self.core.observe()), {}
+
+    def _per_formation(self, seed: int | list[int | None] | None, name: str) -> list[int | None]:
+        b = self.num_formations
+        if seed is None:
+            return [None] * b
+        seeds: list[int | None] = (
+            [int(seed) + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
+        )
+        if len(seeds) != b:
+            raise ValueError(f"reset({name}=…) needs an int or a list of {b} seeds (one per formation), got {seed!r}")
+        return seeds
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:

@@ -1,0 +1,402 @@
+"""Communication channel between what vessels transmit and what the others observe.
+
+The paper analyses ideal links: vessel ``j`` knows ``(x_i, ẋ_i)`` of every
+``i ∈ A_j`` at every instant. It is motivated by links that are not ideal:
+acoustic modems "plagued with errors, transmission delay, multi-path fading"
+with little bandwidth, and radio channels on which "only one vehicle can
+transmit ... at a time", with links lost "due to failures or vessels moving out
+of range". This module models those conditions (our extension; the defaults
+are the ideal links of the paper).
+
+Timing (everything happens at the control instants ``t_k = k·dt``):
+
+1. **Which links exist now.** Link ``i → j`` exists at ``t_k`` iff it is in the
+   communication graph at ``t_k`` (the scenario's ``topology``, or the graph of
+   ``topology_schedule`` active at ``t_k``), the vessels are at most ``range``
+   apart, and the link has not randomly failed (failure rate λ, recovery rate
+   μ per second: per control period a live link fails with probability
+   ``1 − e^{−λ·dt}``, a failed one recovers with ``1 − e^{−μ·dt}``; every link
+   is live at reset).
+2. **Who transmits.** Without TDMA every vessel transmits at ``t_k`` when
+   ``k`` is a multiple of ``period/dt`` (``period = None``: every control
+   period). With TDMA (``tdma_slot``) the channel carries one transmitter per
+   slot, round robin: vessel ``i`` transmits when ``k mod (n·S) = i·S`` with
+   ``S = tdma_slot/dt``, so each vessel updates every ``n·tdma_slot`` seconds.
+3. **Loss.** A message from ``i`` reaches ``j`` only if the link exists at
+   sending and survives an independent loss draw per link and message:
+   Bernoulli(``loss``), or the Gilbert–Elliott chain of :class:`GilbertElliott`
+   (one chain per link, advanced once per message sent on it).
+4. **Latency.** A message is time-stamped at sending, ``t_s = t_k``; it arrives
+   ``latency + jitter·U`` seconds later (``U ~ Uniform[0, 1)``) and is
+   delivered at the first control instant at or after its arrival time, never
+   before. A latency of ``m·dt`` delays it by exactly ``m`` control periods.
+5. **What is observed.** Vessel ``j`` holds, per link, the newest message
+   received (zero-order hold; a late message never replaces a newer one). Its
+   observation slot for ``i`` shows ``(link, θ_j − θ_i(t_s), ẋ_j − ẋ_i(t_s),
+   t_k − t_s)`` where ``link = 1`` iff the link exists now *and* has delivered
+   at least one message since reset; otherwise the slot is all zeros.
+
+With the default :class:`ChannelConfig` nothing of this runs and the
+observations are those of the ideal links; with a configuration that exists
+but does not impair (zero loss, zero latency, every period, unlimited range)
+the channel path reproduces them bit for bit (tests/test_channel.py).
+
+Randomness comes only from the channel stream: one ``np.random.Generator``
+per formation, separate from the initial-state generator, seeded at reset by
+the front end (:func:`channel_generator`). It also draws the sensor noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from marine_formation_env.errors import ConfigError, check_number
+
+if TYPE_CHECKING:
+    from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = ["ChannelConfig", "GilbertElliott", "LinkChannel", "channel_generator"]
+
+#: Spawn key that separates the channel stream from the initial-state stream of one seed.
+CHANNEL_STREAM_KEY = 0x43484E
+
+
+def channel_generator(seed: int | None) -> np.random.Generator:
+    """The channel stream for a reset seed: independent of ``np.random.default_rng(seed)``.
+
+    ``None`` draws fresh entropy.
+    """
+    if seed is None:
+        return np.random.default_rng()
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"a channel seed must be an integer ≥ 0 or None, got {seed!r}")
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(CHANNEL_STREAM_KEY,)))
+
+
+def _probability(owner: str, key: str, value: Any) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 <= value <= 1.0):
+        raise ConfigError(f"{owner}.{key} must be a probability in [0, 1], got {value!r}")
+
+
+@dataclass(frozen=True)
+class GilbertElliott:
+    """Bursty packet loss: a two-state (good/bad) Markov chain per link.
+
+    Before each message on a link the chain moves good → bad with probability
+    ``p_good_to_bad`` and bad → good with ``p_bad_to_good``; the message is then
+    lost with ``loss_good`` or ``loss_bad``. The chain starts in its stationary
+    distribution, so the long-run loss rate is :attr:`mean_loss` from the first
+    message on, and a bad spell lasts ``1/p_bad_to_good`` messages on average.
+
+    Attributes:
+        p_good_to_bad, p_bad_to_good: transition probabilities per message.
+        loss_good, loss_bad: loss probability in each state.
+    """
+
+    p_good_to_bad: float = 0.05
+    p_bad_to_good: float = 0.3
+    loss_good: float = 0.0
+    loss_bad: float = 1.0
+
+    def __post_init__(self) -> None:
+        for key in ("p_good_to_bad", "p_bad_to_good", "loss_good", "loss_bad"):
+            _probability("channel.burst", key, getattr(self, key))
+        if self.p_good_to_bad + self.p_bad_to_good == 0:
+            raise ConfigError(
+                "channel.burst needs p_good_to_bad + p_bad_to_good > 0 (a chain that never moves has no "
+                "stationary distribution)"
+            )
+
+    @property
+    def p_bad(self) -> float:
+        """Stationary probability of the bad state."""
+        return self.p_good_to_bad / (self.p_good_to_bad + self.p_bad_to_good)
+
+    @property
+    def mean_loss(self) -> float:
+        """Long-run fraction of messages lost."""
+        return self.p_bad * self.loss_bad + (1.0 - self.p_bad) * self.loss_good
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """How messages travel between vessels (module docstring); the defaults are ideal links.
+
+    Attributes:
+        loss: Bernoulli loss probability per link and message, in [0, 1].
+        burst: Gilbert–Elliott bursty loss instead of ``loss`` (a
+            :class:`GilbertElliott` or a mapping of its fields); None: Bernoulli.
+        latency: fixed delay from sending to arrival [s], ≥ 0.
+        jitter: random extra delay, uniform in [0, jitter) [s], ≥ 0.
+        period: each vessel transmits every ``period`` seconds (a multiple of
+            the control period dt); None: every control period.
+        tdma_slot: TDMA slot length [s] (a multiple of dt): one transmitter per
+            slot, round robin, so each vessel transmits every ``n·tdma_slot``;
+            None: no TDMA. Excludes ``period``.
+        range: links exist only between vessels at most this far apart [m]
+            (``inf``: unlimited).
+        failure_rate: rate λ at which a live link fails [1/s] (0: never).
+        recovery_rate: rate μ at which a failed link recovers [1/s] (0: never).
+    """
+
+    loss: float = 0.0
+    burst: Any = None
+    latency: float = 0.0
+    jitter: float = 0.0
+    period: Any = None
+    tdma_slot: Any = None
+    range: float = math.inf
+    failure_rate: float = 0.0
+    recovery_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        _probability("channel", "loss", self.loss)
+        if self.burst is not None and not isinstance(self.burst, GilbertElliott):
+            if not isinstance(self.burst, dict):
+                raise ConfigError(f"channel.burst must be a GilbertElliott, a mapping or None, got {self.burst!r}")
+            valid = set(GilbertElliott.__dataclass_fields__)
+            unknown = sorted(set(self.burst) - valid)
+            if unknown:
+                raise ConfigError(f"unknown channel.burst key(s) {unknown}; valid keys: {sorted(valid)}")
+            object.__setattr__(self, "burst", GilbertElliott(**self.burst))
+        if self.burst is not None and self.loss > 0:
+            raise ConfigError(
+                f"give either channel.loss (Bernoulli, got {self.loss}) or channel.burst (Gilbert–Elliott), not both"
+            )
+        check_number("channel", "latency", self.latency)
+        check_number("channel", "jitter", self.jitter)
+        for key in ("period", "tdma_slot"):
+            if getattr(self, key) is not None:
+                check_number("channel", key, getattr(self, key), strict=True)
+        if self.period is not None and self.tdma_slot is not None:
+            raise ConfigError(
+                f"give either channel.period ({self.period} s) or channel.tdma_slot ({self.tdma_slot} s): with TDMA "
+                "each vessel transmits every n·tdma_slot seconds"
+            )
+        rng = self.range
+        if isinstance(rng, bool) or not isinstance(rng, (int, float)) or math.isnan(rng) or not rng > 0:
+            raise ConfigError(f"channel.range must be a distance > 0 m (inf: unlimited), got {rng!r}")
+        check_number("channel", "failure_rate", self.failure_rate)
+        check_number("channel", "recovery_rate", self.recovery_rate)
+
+    @property
+    def is_ideal(self) -> bool:
+        """The default configuration: the paper's ideal links."""
+        return self == ChannelConfig()
+
+    @property
+    def max_delay(self) -> float:
+        """The longest delay a message can have [s]."""
+        return self.latency + self.jitter
+
+    def period_steps(self, dt: float) -> int:
+        """Control periods between two transmissions of one vessel without TDMA."""
+        return 1 if self.period is None else _multiple(self.period, dt, "channel.period")
+
+    def slot_steps(self, dt: float) -> int:
+        """Control periods per TDMA slot (requires ``tdma_slot``)."""
+        return _multiple(self.tdma_slot, dt, "channel.tdma_slot")
+
+    def validate_timing(self, dt: float) -> None:
+        """Check that ``period`` and ``tdma_slot`` are multiples of the control period ``dt``."""
+        self.period_steps(dt)
+        if self.tdma_slot is not None:
+            self.slot_steps(dt)
+
+
+def _multiple(value: float, dt: float, name: str) -> int:
+    ratio = value / dt
+    steps = round(ratio)
+    if steps < 1 or abs(ratio - steps) > 1e-6 * max(1.0, ratio):
+        raise ConfigError(
+            f"{name} = {value} s must be a whole number of control periods dt = {dt} s (transmissions happen at "
+            "control instants)"
+        )
+    return int(steps)
+
+
+class LinkChannel:
+    """The channel state of ``B`` formations of ``N`` vessels, held by :class:`~.core.FormationCore`.
+
+    Arrays are indexed ``[b, j, i]`` for the link ``i → j`` (receiver ``j``,
+    sender ``i``), like ``A[j, i]`` of the graph. The pending ring buffer has
+    one slot per possible delay in control periods; messages sharing an
+    arrival instant on one link keep only the newest.
+
+    Attributes:
+        up: ``(B, N, N)`` the link exists now.
+        has_message: ``(B, N, N)`` a message has been received on the link since reset.
+        held_theta, held_xdot, held_time: the held message: ``θ_i = x_i − D_xi``
+            [m], inertial ``ẋ_i`` [m/s], and its send time [s].
+        transmitted: ``(B, N)`` which vessels transmitted at the last update.
+    """
+
+    def __init__(self, config: ScenarioConfig, num_envs: int) -> None:
+        ch = config.channel
+        self.config = config
+        self.channel: ChannelConfig = ch
+        self.dt = config.dt
+        n, b = config.n_vessels, num_envs
+        self.n, self.num_envs = n, b
+        self.depth = math.ceil(ch.max_delay / self.dt - 1e-9) + 1
+        if config.topology_schedule:
+            self._graphs = np.stack([g.adjacency for _, g in config.topology_schedule])
+            self._ends = np.cumsum([dwell for dwell, _ in config.topology_schedule])
+        else:
+            self._graphs = config.graph.adjacency[None]
+            self._ends = np.array([math.inf])
+        self._tdma = ch.tdma_slot is not None
+        self._every = ch.slot_steps(self.dt) if self._tdma else ch.period_steps(self.dt)
+        self._p_fail = -math.expm1(-ch.failure_rate * self.dt)
+        self._p_recover = -math.expm1(-ch.recovery_rate * self.dt)
+        self._noise = config.sensor_noise.as_array()
+        self._noisy = not config.sensor_noise.is_zero
+        shape = (b, n, n)
+        self.up = np.zeros(shape, dtype=bool)
+        self.has_message = np.zeros(shape, dtype=bool)
+        self.held_theta = np.zeros(shape)
+        self.held_xdot = np.zeros(shape)
+        self.held_time = np.zeros(shape)
+        self.failed = np.zeros(shape, dtype=bool)
+        self.bad = np.zeros(shape, dtype=bool)
+        self.transmitted = np.zeros((b, n), dtype=bool)
+        deep = (self.depth, *shape)
+        self._pend_valid = np.zeros(deep, dtype=bool)
+        self._pend_theta = np.zeros(deep)
+        self._pend_xdot = np.zeros(deep)
+        self._pend_time = np.zeros(deep)
+        self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(b)]
+
+    # ------------------------------------------------------------------ draws
+    @property
+    def draws_per_link(self) -> int:
+        """Uniform variates drawn per link and update: failure, Gilbert–Elliott, loss, jitter."""
+        ch = self.channel
+        return 1 + int(ch.failure_rate > 0 or ch.recovery_rate > 0) + int(ch.burst is not None) + int(ch.jitter > 0)
+
+    def _uniforms(self, ids: np.ndarray) -> np.ndarray:
+        """``(draws_per_link, len(ids), N, N)`` uniforms, one generator call per formation."""
+        shape = (self.draws_per_link, self.n, self.n)
+        return np.stack([self.rngs[b].random(shape) for b in ids], axis=1)
+
+    def measurement_noise(self, ids: np.ndarray) -> np.ndarray | None:
+        """``(len(ids), N, 6)`` Gaussian sensor noise for the state columns, or None without noise."""
+        if not self._noisy:
+            return None
+        return np.stack([self.rngs[b].standard_normal((self.n, 6)) for b in ids]) * self._noise
+
+    # ----------------------------------------------------------------- update
+    def graph_at(self, time: np.ndarray) -> np.ndarray:
+        """``(len(time), N, N)`` adjacency of the communication graph at each time [s]."""
+        if len(self._graphs) == 1:
+            return np.broadcast_to(self._graphs[0], (len(time), self.n, self.n))
+        phase = np.mod(np.asarray(time) + 1e-9, self._ends[-1])
+        return self._graphs[np.searchsorted(self._ends, phase, side="right")]
+
+    def transmitters(self, steps: np.ndarray) -> np.ndarray:
+        """``(len(steps), N)`` which vessels transmit at control instant ``steps``."""
+        steps = np.asarray(steps)[:, None]
+        if self._tdma:
+            return np.mod(steps, self.n * self._every) == np.arange(self.n) * self._every
+        return np.broadcast_to(np.mod(steps, self._every) == 0, (len(steps), self.n))
+
+    def reset(self, ids: np.ndarray) -> None:
+        """Forget everything of formations ``ids``: no messages, every link live, chains stationary."""
+        for arr in (self.up, self.has_message, self.failed, self.transmitted):
+            arr[ids] = False
+        for arr in (self.held_theta, self.held_xdot, self.held_time):
+            arr[ids] = 0.0
+        self._pend_valid[:, ids] = False
+        burst = self.channel.burst
+        if burst is not None:
+            self.bad[ids] = np.stack([self.rngs[b].random((self.n, self.n)) < burst.p_bad for b in ids])
+
+    def update(
+        self,
+        ids: np.ndarray,
+        steps: np.ndarray,
+        time: np.ndarray,
+        theta: np.ndarray,
+        xdot: np.ndarray,
+        positions: np.ndarray,
+    ) -> None:
+        """One control instant of formations ``ids``: link states, transmissions, arrivals.
+
+        Args:
+            ids: ``(m,)`` formation indices.
+            steps: ``(m,)`` control periods since reset (0 at reset).
+            time: ``(m,)`` time [s].
+            theta: ``(m, N)`` measured ``x − D_x`` [m] the vessels transmit.
+            xdot: ``(m, N)`` measured inertial ``ẋ`` [m/s] they transmit.
+            positions: ``(m, N, 2)`` true positions [m] (for ``range``).
+        """
+        ch = self.channel
+        draws = iter(self._uniforms(ids))
+        up = self.graph_at(time).copy()
+        if math.isfinite(ch.range):
+            gap = positions[:, :, None, :] - positions[:, None, :, :]
+            up &= np.hypot(gap[..., 0], gap[..., 1]) <= ch.range
+        if ch.failure_rate > 0 or ch.recovery_rate > 0:
+            r = next(draws)
+            failed = self.failed[ids]
+            fresh = (np.asarray(steps) == 0)[:, None, None]  # every link is live at reset
+            failed = np.where(fresh, False, np.where(failed, r >= self._p_recover, r < self._p_fail))
+            self.failed[ids] = failed
+            up &= ~failed
+        self.up[ids] = up
+        tx = self.transmitters(steps)
+        self.transmitted[ids] = tx
+        send = up & tx[:, None, :]
+        if ch.burst is not None:
+            r = next(draws)
+            bad = self.bad[ids]
+            moved = np.where(bad, r >= ch.burst.p_bad_to_good, r < ch.burst.p_good_to_bad)
+            bad = np.where(send, moved, bad)
+            self.bad[ids] = bad
+            p_loss: Any = np.where(bad, ch.burst.loss_bad, ch.burst.loss_good)
+        else:
+            p_loss = ch.loss
+        delivered = send & (next(draws) >= p_loss)
+        delay = ch.latency + (ch.jitter * next(draws) if ch.jitter > 0 else 0.0)
+        delay_steps = np.ceil(delay / self.dt - 1e-9).astype(np.int64) if ch.max_delay > 0 else 0
+        arrival_slot = np.mod(np.asarray(steps)[:, None, None] + delay_steps, self.depth)
+        sel_b, sel_j, sel_i = np.nonzero(delivered)
+        if sel_b.size:
+            slot = np.broadcast_to(arrival_slot, delivered.shape)[sel_b, sel_j, sel_i]
+            where = (slot, ids[sel_b], sel_j, sel_i)
+            self._pend_valid[where] = True
+            self._pend_theta[where] = theta[sel_b, sel_i]
+            self._pend_xdot[where] = xdot[sel_b, sel_i]
+            self._pend_time[where] = time[sel_b]
+        # arrivals at this instant (zero-delay messages sent just now included)
+        now = (np.mod(steps, self.depth), ids)
+        arrived = self._pend_valid[now]
+        if arrived.any():
+            newer = arrived & (~self.has_message[ids] | (self._pend_time[now] > self.held_time[ids]))
+            for held, pend in (
+                (self.held_theta, self._pend_theta),
+                (self.held_xdot, self._pend_xdot),
+                (self.held_time, self._pend_time),
+            ):
+                held[ids] = np.where(newer, pend[now], held[ids])
+            self.has_message[ids] |= newer
+            self._pend_valid[now] = False
+
+    def slots(
+        self, ids: Any, slot_index: np.ndarray, time: np.ndarray, theta: np.ndarray, xdot: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Slot features ``(link, Δθ, Δẋ, age)``, each ``(m, N, N−1)``, of formations ``ids``.
+
+        ``theta``/``xdot`` are the receivers' own measured values now.
+        """
+        rows = np.arange(self.n)[:, None]
+        pick = (slice(None), rows, slot_index)
+        linked = (self.up[ids] & self.has_message[ids])[pick].astype(float)
+        d_theta = linked * (theta[:, :, None] - self.held_theta[ids][pick])
+        d_xdot = linked * (xdot[:, :, None] - self.held_xdot[ids][pick])
+        age = linked * (np.asarray(time)[:, None, None] - self.held_time[ids][pick])
+        return linked, d_theta, d_xdot, age
