@@ -9,13 +9,27 @@ Examples::
     python -m baselines.evaluate --policy reference --policy runs/paper_speed/model.zip --episodes 10 \\
         --plot results/compare.png
 
+    # the reference under the acoustic preset, plain and extrapolating, with 3 s more latency
+    python -m baselines.evaluate --scenario acoustic --policy reference --policy reference:extrapolate \
+        --set channel.latency=3.0 --episodes 5
+    # plain LOS against integral LOS in a cross current (the policy steers at the guidance level)
+    python -m baselines.evaluate --scenario current --set action_level=guidance \
+        --policy reference --policy reference:ilos=1.0
+
 ``--policy`` repeats: ``reference``, ``random``, or a model saved by
-``python -m training.train`` (``runs/NAME/model.zip`` or the run folder). A
+``python -m training.train`` (``runs/NAME/model.zip`` or the run folder). The
+reference takes options after a colon, comma-separated: ``extrapolate``
+(predict neighbours' positions from their last message's velocity and age) and
+``ilos=σ`` (integral LOS with gain σ [m/s], ``ilos`` alone: σ = 1), e.g.
+``reference:extrapolate,ilos=1.0``. A
 model brings its training scenario and env overrides; ``--scenario`` and
 ``--set`` take precedence over them. ``--set KEY=VALUE`` overrides any scenario
 field (``--set action_level=force``, ``--set n_vessels=5 --set topology=ring``,
 ``--set 'gains={"delta": 80}'``); values are Python/JSON literals, anything
-else is taken as a string. Episode ``k`` is reset with seed ``seed + k``, the
+else is taken as a string. A dotted key sets one field of a nested setting and
+keeps the scenario's others: ``--set channel.loss=0.3``,
+``--set channel.latency=2.0``, ``--set current.speed=0.8``,
+``--set sensor_noise.position=0.5``. Episode ``k`` is reset with seed ``seed + k``, the
 same for every policy. With several policies, ``--plot`` draws them side by
 side (and each policy's own Fig. 6-style figure beside it).
 """
@@ -42,9 +56,17 @@ __all__ = ["evaluate", "main", "make_policy", "parse_overrides"]
 
 BUILTIN_POLICIES = ("reference", "random")
 
+#: Default integral-LOS gain σ [m/s] of ``reference:ilos``.
+DEFAULT_ILOS_GAIN = 1.0
+
 
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
-    """Parse ``KEY=VALUE`` strings; VALUE is a Python/JSON literal or a plain string."""
+    """Parse ``KEY=VALUE`` strings; VALUE is a Python/JSON literal or a plain string.
+
+    ``PARENT.FIELD=VALUE`` collects into ``{PARENT: {FIELD: VALUE}}``, which
+    :func:`~marine_formation_env.scenarios.make_config` merges into the
+    scenario's setting field by field.
+    """
     out: dict[str, Any] = {}
     for item in items:
         key, sep, raw = item.partition("=")
@@ -57,13 +79,41 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
             value = ast.literal_eval(lowered)
         except (ValueError, SyntaxError):
             value = text
-        out[key] = value
+        parent, dot, child = key.partition(".")
+        if dot:
+            if not parent or not child or "." in child:
+                raise ValueError(f"--set expects KEY=VALUE or PARENT.FIELD=VALUE, got {item!r}")
+            nested = out.setdefault(parent, {})
+            if not isinstance(nested, dict):
+                raise ValueError(f"--set {item!r}: {parent} was already set to {nested!r}")
+            nested[child] = value
+        else:
+            out[key] = value
     return out
+
+
+def reference_options(spec: str) -> dict[str, Any]:
+    """Keyword arguments of :class:`ReferencePolicy` from ``reference[:opt,opt=value]``."""
+    _, _, raw = spec.partition(":")
+    options: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in raw.split(","))):
+        name, eq, value = item.partition("=")
+        if name == "extrapolate" and not eq:
+            options["extrapolate"] = True
+        elif name == "ilos":
+            try:
+                options["integral_los"] = float(value) if eq else DEFAULT_ILOS_GAIN
+            except ValueError:
+                raise ValueError(f"policy {spec!r}: ilos=σ needs a number, got {value!r}") from None
+        else:
+            raise ValueError(f"policy {spec!r}: unknown reference option {item!r}; options: extrapolate, ilos[=σ]")
+    return options
 
 
 def is_model_path(spec: str) -> bool:
     """Whether a ``--policy`` value names a saved model rather than a built-in policy."""
-    return spec not in BUILTIN_POLICIES and (spec.endswith(".zip") or Path(spec).is_dir())
+    builtin = spec in BUILTIN_POLICIES or spec.startswith("reference:")
+    return not builtin and (spec.endswith(".zip") or Path(spec).is_dir())
 
 
 def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
@@ -79,8 +129,8 @@ def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
 
 def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
     """Build a policy from its command-line name (or a loaded model)."""
-    if spec == "reference":
-        return ReferencePolicy(env)
+    if spec == "reference" or spec.startswith("reference:"):
+        return ReferencePolicy(env, **reference_options(spec))
     if spec == "random":
         return RandomPolicy(env, seed=seed)
     if loaded is not None and spec in loaded:
@@ -218,14 +268,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--policy",
         action="append",
         dest="policies",
-        help=f"policy to run; repeatable ({', '.join(BUILTIN_POLICIES)}, or a saved model .zip / run folder)",
+        help="policy to run; repeatable: reference[:extrapolate,ilos=σ], random, or a saved model .zip / run folder",
     )
     parser.add_argument("--episodes", type=int, default=1, help="episodes per policy (default 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--json", type=Path, help="write metrics (per episode and summary) to this JSON file")
     parser.add_argument("--save-trajectory", type=Path, help="write the first episode to this .npz (t, state, …)")
     parser.add_argument("--plot", type=Path, help="write the Fig. 6-style figure of the first episode here")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override (PARENT.FIELD=VALUE too)"
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     args = parser.parse_args(argv)
     policies = args.policies or ["reference"]

@@ -2,7 +2,11 @@
 
 Definitions (n vessels, θ_j = x_j − D_xj):
 
-* cross-track error e_j = y_j − D_yj (goal 7); heading ψ_j (goal 8, wrapped);
+* cross-track error e_j = y_j − D_yj (goal 7); heading ψ_j (goal 8, wrapped).
+  With an ocean current a vessel that holds its path must crab into the
+  current, so goal (8) becomes one on the course over ground
+  ``χ_j = atan2(ẏ_j, ẋ_j)`` (inertial velocities, current included), which is
+  what "heading" then measures;
 * coordination spread max_j θ_j − min_j θ_j (goal 9a);
 * speed error u_j − u_d(t) (goals 9b, 10);
 * settling time: the earliest time after which, until the end of the episode,
@@ -35,12 +39,22 @@ SETTLING_BANDS = {"cross_track": 0.5, "heading_deg": 0.5, "spread": 0.5, "speed"
 SUCCESS_BANDS = {"cross_track": 1.0, "heading_deg": 2.0, "spread": 1.0, "speed": 0.1}
 
 
+def _heading(traj: Trajectory, cfg: ScenarioConfig) -> np.ndarray:
+    """ψ (still water) or the course over ground χ (with a current), ``(T+1, n)`` [rad]."""
+    psi = traj.state[..., 2]
+    if cfg.current.is_zero:
+        return wrap_angle(psi)  # type: ignore[no-any-return]
+    u, v = traj.state[..., 3], traj.state[..., 4]
+    vc_x, vc_y = cfg.current.velocity(traj.t[:, None])
+    return np.arctan2(u * np.sin(psi) + v * np.cos(psi) + vc_y, u * np.cos(psi) - v * np.sin(psi) + vc_x)
+
+
 def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
     s = traj.state
     theta = s[..., 0] - cfg.formation[:, 0]
     return {
         "cross_track": s[..., 1] - cfg.formation[:, 1],
-        "heading_deg": np.degrees(wrap_angle(s[..., 2])),
+        "heading_deg": np.degrees(_heading(traj, cfg)),
         "spread": np.ptp(theta, axis=1),
         "speed": s[..., 3] - traj.u_d[:, None],
     }

@@ -15,6 +15,27 @@ observation only (never the global state):
 
 It needs the model parameters and gains (it is a model-based controller);
 those come from the env's configuration, not from its state.
+
+Two options go beyond the paper (our extensions, off by default):
+
+* ``extrapolate=True``: over a non-ideal channel a slot holds vessel i's
+  position as it was when the message was sent, ``age`` seconds ago, while j's
+  own position is current, so ``Δθ`` is off by about ``ẋ_i·age`` (7.5 m for a
+  1.5 s old message at 5 m/s). The option predicts i's position now from the
+  received velocity: ``Δθ ← Δθ − ẋ_i(t_s)·age`` with
+  ``ẋ_i(t_s) = ẋ_j − Δẋ`` and ``ẋ_j = u cos ψ − v sin ψ`` from j's own
+  observation (through the water: an along-path current V_x biases the
+  prediction by ``V_x·age``).
+* ``integral_los=σ`` (σ > 0, in m/s): integral LOS (Børhaug, Pavlov and
+  Pettersen, CDC 2008) instead of (12): ``ψ_d = −atan((e + σ·e_int)/Δ)`` with
+  ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)``, integrated once per control period.
+  With an unknown constant current it drives the cross-track error to zero,
+  where plain LOS settles off the path. The policy steers only at the
+  ``guidance`` and ``force`` levels (at ``speed`` the env's built-in plain LOS
+  steers), so the option needs one of those. At ``force`` the ILOS angle
+  replaces ψ_LOS in (14); its feed-forward omits the integrator's slow
+  contribution σ·ė_int. The integrators are state: call :meth:`reset` at
+  every episode start (:func:`~baselines.rollout.run_episode` does).
 """
 
 from __future__ import annotations
@@ -38,22 +59,61 @@ class ReferencePolicy(BatchPolicy):
     Args:
         env: a ParallelEnv of this package, anything with a ``config``
             attribute (wrappers are unwrapped), or a :class:`ScenarioConfig`.
+        extrapolate: predict each neighbour's position now from its last
+            message's velocity and age (module docstring).
+        integral_los: σ > 0 [m/s] to steer with integral LOS (module
+            docstring; ``guidance`` and ``force`` levels); None: the paper's LOS.
 
     Use :meth:`act` with a PettingZoo observation dict, or :meth:`act_batch`
     with an array of observations ``(..., obs_dim)``.
     """
 
-    def __init__(self, env: Any) -> None:
+    def __init__(self, env: Any, extrapolate: bool = False, integral_los: float | None = None) -> None:
         config = env if isinstance(env, ScenarioConfig) else getattr(getattr(env, "unwrapped", env), "config", None)
         if not isinstance(config, ScenarioConfig):
             raise TypeError(
                 f"ReferencePolicy needs a marine_formation_env env or ScenarioConfig, got {type(env).__name__}"
             )
+        if not isinstance(extrapolate, bool):
+            raise TypeError(f"extrapolate must be True or False, got {extrapolate!r}")
+        if integral_los is not None:
+            if isinstance(integral_los, bool) or not isinstance(integral_los, (int, float)) or not integral_los > 0:
+                raise ValueError(f"integral_los must be a gain σ > 0 [m/s] or None, got {integral_los!r}")
+            if config.action_level == "speed":
+                raise ValueError(
+                    "integral_los needs action_level 'guidance' or 'force': at 'speed' the env's built-in plain LOS "
+                    "steers and the policy only commands the speed"
+                )
         self.config = config
         self.layout = ObservationLayout(config.n_vessels)
+        self.extrapolate = extrapolate
+        self.integral_los = None if integral_los is None else float(integral_los)
+        self._e_int: np.ndarray | None = None
 
-    def commands(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+    def reset(self) -> None:
+        """Start a new episode: zero the integral-LOS integrators (no-op without them)."""
+        self._e_int = None
+
+    def _steering_error(self, e: np.ndarray, advance: bool) -> np.ndarray:
+        """The error LOS steers on: ``e`` (paper), or ``e + σ·e_int`` (integral LOS).
+
+        With ``advance`` the integrators then take one Euler step of ``dt``.
+        """
+        if self.integral_los is None:
+            return e
+        sigma, delta = self.integral_los, self.config.gains.delta
+        if self._e_int is None or self._e_int.shape != e.shape:
+            self._e_int = np.zeros_like(e)
+        z = e + sigma * self._e_int
+        if advance:
+            self._e_int = self._e_int + self.config.dt * delta * e / (z * z + delta * delta)
+        return z
+
+    def commands(self, obs: np.ndarray, advance: bool = False) -> dict[str, np.ndarray]:
         """Physical commands for observations ``(..., obs_dim)``.
+
+        ``advance`` steps the integral-LOS integrators after use (once per
+        control period: :meth:`act_batch` does it).
 
         Returns:
             ``{"u_c", "u_c_dot"}`` always, plus ``psi_d`` (guidance) or
@@ -64,23 +124,35 @@ class ReferencePolicy(BatchPolicy):
         if obs.shape[-1:] != (self.layout.dim,):
             raise ValueError(f"observations must end in dimension {self.layout.dim}, got shape {obs.shape}")
         own, slots = self.layout.split(obs)
-        linked = slots[..., 0]
-        s = np.sum(linked * slots[..., 1], axis=-1)
-        s_dot = np.sum(linked * slots[..., 2], axis=-1)
         e, psi, u, v, r, u_d, u_d_dot = (own[..., k] for k in range(7))
+        linked, d_theta, d_xdot, age = (slots[..., k] for k in range(4))
+        if self.extrapolate:
+            x_dot_own = u * np.cos(psi) - v * np.sin(psi)
+            d_theta = d_theta - (x_dot_own[..., None] - d_xdot) * age
+        s = np.sum(linked * d_theta, axis=-1)
+        s_dot = np.sum(linked * d_xdot, axis=-1)
         u_c, u_c_dot = consensus_speed(s, s_dot, u_d, u_d_dot, cfg.gains.a)
         out = {"u_c": u_c, "u_c_dot": u_c_dot}
         if cfg.action_level == "guidance":
-            out["psi_d"] = los_angle(e, cfg.gains.delta)
+            out["psi_d"] = los_angle(self._steering_error(e, advance), cfg.gains.delta)
         elif cfg.action_level == "force":
             out["tau_u"], out["tau_r"] = path_following_inputs(
-                cfg.params, cfg.gains, e, psi, u, v, r, u_c, u_c_dot, cfg.paper_as_printed
+                cfg.params,
+                cfg.gains,
+                self._steering_error(e, advance),
+                psi,
+                u,
+                v,
+                r,
+                u_c,
+                u_c_dot,
+                cfg.paper_as_printed,
             )
         return out
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Normalized actions ``(..., A)`` for observations ``(..., obs_dim)``."""
-        cmd = self.commands(obs)
+        cmd = self.commands(obs, advance=True)
         keys = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
         chosen = {k: cmd[k] for k in keys[self.config.action_level]}
         return normalized_actions(self.config, **chosen).astype(np.float32)

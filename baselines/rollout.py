@@ -107,12 +107,16 @@ def run_episode(
     Args:
         env: a ParallelEnv of this package (not wrapped: the physical state is
             read from it for the record, never passed to the policy).
-        policy: has ``act(observations)``; optionally ``commanded_speed``.
+        policy: has ``act(observations)``; optionally ``commanded_speed``,
+            and ``reset()``, called before the episode starts (stateful
+            policies such as the reference with integral LOS).
         seed, options: passed to ``env.reset``.
     """
     cfg = env.config
     n, steps = cfg.n_vessels, cfg.max_steps
     obs, _ = env.reset(seed=seed, options=options)
+    if callable(getattr(policy, "reset", None)):
+        policy.reset()
     agents = list(env.possible_agents)
     states = np.empty((steps + 1, n, 6))
     times = np.empty(steps + 1)
