@@ -13,6 +13,7 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   max |e_j| ≤ 0.5 m, max |ψ_j| ≤ 0.5°, the spread ≤ 0.5 m and
   max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
 * time outside the band: control periods with some u_cj ∉ (U_min, U_max), in s;
+  and the same for the vessels' actual surge speeds u_j (recorded states);
 * effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
 * return: per-vessel sum of rewards, averaged over vessels;
 * success: the episode ran to its time limit (no collision, no exit from the
@@ -73,6 +74,16 @@ def settling_time(traj: Trajectory, cfg: ScenarioConfig, bands: dict[str, float]
     return float(traj.t[0] if outside.size == 0 else traj.t[outside[-1] + 1])
 
 
+def _surge_outside_time(traj: Trajectory, cfg: ScenarioConfig) -> float:
+    """Time [s] during which some vessel's surge speed u_j was outside (U_min, U_max).
+
+    Each recorded instant but the last stands for the control period that follows it.
+    """
+    u = traj.state[:-1, :, 3]
+    outside = ~np.all((u > cfg.u_min) & (u < cfg.u_max), axis=1)
+    return float(np.sum(np.diff(traj.t)[outside]))
+
+
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
@@ -107,6 +118,7 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
         "commanded_speed_min": float(np.nanmin(u_c)) if known.any() else None,
         "commanded_speed_max": float(np.nanmax(u_c)) if known.any() else None,
         "time_outside_speed_band": float(outside.sum() * cfg.dt),
+        "surge_outside_band_time": _surge_outside_time(traj, cfg),
         "effort": float(np.mean(np.square(traj.actions))) if traj.actions.size else 0.0,
         "min_separation": float(separation.min()),
         "terminated": traj.terminated,

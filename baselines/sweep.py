@@ -1,0 +1,270 @@
+"""Where does the paper's controller degrade? Sweep packet loss and latency.
+
+For every pair (loss probability p, latency L) of a grid, run the reference
+policy (plain and, by default, extrapolating) for a few episodes and record
+the final coordination spread, the settling time, the time some vessel's
+surge speed spent outside (U_min, U_max), and collisions. Writes a JSON file,
+a markdown table and a figure of heat maps (one row per policy)::
+
+    python -m baselines.sweep --out results/sweep
+    python -m baselines.sweep --scenario radio --loss 0,0.2,0.5 --latency 0,1,2 --episodes 5
+
+The base scenario keeps everything but the swept settings: loss is Bernoulli
+(a Gilbert–Elliott ``burst`` of the scenario is dropped) and the latency is
+fixed (the scenario's jitter is kept). By default the vessels start around
+their formation slots with random offsets (the generated formations' noise,
+:data:`~marine_formation_env.scenarios.GENERATED_INIT_NOISE`) and a 5 m
+safety distance, so that collisions mean something: the paper's own initial
+state makes two vessels cross 0.5 m apart even over ideal links
+(``--paper-initial-state`` keeps it). Episode ``k`` of every cell uses reset
+seed ``seed + k``: the same initial states and channel streams everywhere.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines.evaluate import make_policy, parse_overrides
+from baselines.metrics import episode_metrics
+from baselines.rollout import run_episode
+from marine_formation_env.env import parallel_env
+from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
+
+__all__ = ["METRICS", "main", "sweep"]
+
+#: What each cell reports: key, label, unit.
+METRICS = (
+    ("final_spread", "final spread", "m"),
+    ("settling_time", "settling time", "s"),
+    ("surge_outside_band_time", "u outside band", "s"),
+    ("collision_rate", "collisions", "fraction"),
+)
+
+
+def _floats(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError("expected at least one number")
+    return values
+
+
+def _cell(episodes: list[dict[str, Any]], horizon: float) -> dict[str, Any]:
+    settled = [e["settling_time"] for e in episodes if e["settling_time"] is not None]
+    return {
+        "final_spread": float(np.mean([e["final_coordination_spread"] for e in episodes])),
+        # an episode that never settles counts as the horizon (a lower bound of its settling time)
+        "settling_time": float(np.mean(settled + [horizon] * (len(episodes) - len(settled)))),
+        "settled_fraction": len(settled) / len(episodes),
+        "surge_outside_band_time": float(np.mean([e["surge_outside_band_time"] for e in episodes])),
+        "collision_rate": float(np.mean([e["collision"] for e in episodes])),
+        "min_separation": float(np.min([e["min_separation"] for e in episodes])),
+    }
+
+
+def sweep(
+    scenario: str,
+    losses: Sequence[float],
+    latencies: Sequence[float],
+    policies: Sequence[str],
+    episodes: int,
+    seed: int,
+    overrides: dict[str, Any],
+    paper_initial_state: bool = False,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Run the grid and return a JSON-friendly report (see the module docstring).
+
+    ``report["cells"][policy][i][k]`` holds the metrics at ``losses[i]``,
+    ``latencies[k]`` (means over episodes; ``settling_time`` counts an
+    unsettled episode as the horizon, ``settled_fraction`` says how many settled).
+    """
+    if episodes < 1:
+        raise ValueError(f"--episodes must be ≥ 1, got {episodes}")
+    base: dict[str, Any] = dict(overrides)
+    if not paper_initial_state:
+        base.setdefault("initial_state", None)
+        base.setdefault("init_noise", GENERATED_INIT_NOISE)
+        base.setdefault("safety_distance", 5.0)
+    channel_override = dict(base.pop("channel", {}) or {})
+    cells: dict[str, list[list[dict[str, Any]]]] = {p: [] for p in policies}
+    bar = None
+    if progress:
+        try:
+            from tqdm import tqdm
+
+            total = len(losses) * len(latencies) * len(policies) * episodes
+            bar = tqdm(total=total, desc="sweep", unit="ep", file=sys.stderr)
+        except ImportError:
+            bar = None
+    config = None
+    for p in losses:
+        rows = {label: [] for label in policies}  # type: dict[str, list[dict[str, Any]]]
+        for latency in latencies:
+            channel = {**channel_override, "loss": p, "latency": latency, "burst": None}
+            env = parallel_env(scenario, **base, channel=channel)
+            config = env.config
+            for label in policies:
+                policy = make_policy(label, env, seed)
+                results = []
+                for k in range(episodes):
+                    results.append(episode_metrics(run_episode(env, policy, seed=seed + k), env.config))
+                    if bar is not None:
+                        bar.update(1)
+                rows[label].append(_cell(results, env.config.horizon))
+            env.close()
+        for label in policies:
+            cells[label].append(rows[label])
+    if bar is not None:
+        bar.close()
+    assert config is not None
+    return {
+        "scenario": scenario,
+        "overrides": {k: repr(v) for k, v in base.items()},
+        "loss": list(losses),
+        "latency": list(latencies),
+        "policies": list(policies),
+        "episodes": episodes,
+        "seed": seed,
+        "config": config.to_dict(),
+        "cells": cells,
+    }
+
+
+def format_markdown(report: dict[str, Any]) -> str:
+    """One markdown table per policy: rows loss p, columns latency, cells ``spread / settling``."""
+    out = []
+    for label in report["policies"]:
+        out.append(f"### {label}\n")
+        out.append(
+            "Each cell: final coordination spread [m] / settling time [s] (✗: some episode never settled; the "
+            "mean then counts it as the horizon) / time with some u outside (U_min, U_max) [s] / collision rate.\n"
+        )
+        header = "| loss p \\ latency | " + " | ".join(f"{lat:g} s" for lat in report["latency"]) + " |"
+        out += [header, "|" + "---|" * (len(report["latency"]) + 1)]
+        for p, row in zip(report["loss"], report["cells"][label], strict=True):
+            cells = []
+            for c in row:
+                mark = "" if c["settled_fraction"] == 1 else " ✗"
+                cells.append(
+                    f"{c['final_spread']:.3g} / {c['settling_time']:.0f}{mark} / "
+                    f"{c['surge_outside_band_time']:.0f} / {c['collision_rate']:.0%}"
+                )
+            out.append(f"| {p:g} | " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)
+
+
+def plot_sweep(report: dict[str, Any], path: str | Path) -> Any:
+    """Heat maps: one row per policy, one column per metric (loss p down, latency across)."""
+    from marine_formation_env.render import require_matplotlib
+
+    require_matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    policies, losses, latencies = report["policies"], report["loss"], report["latency"]
+    fig = Figure(figsize=(4.2 * len(METRICS), 3.4 * len(policies)), dpi=110)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(len(policies), len(METRICS), squeeze=False)
+    horizon = float(report["config"]["horizon"])
+    # one colour scale per metric, shared by the policies so that their rows compare
+    limits = {
+        "final_spread": (-3.0, 2.0),
+        "settling_time": (0.0, horizon),
+        "surge_outside_band_time": (0.0, horizon),
+        "collision_rate": (0.0, 1.0),
+    }
+    for row, label in enumerate(policies):
+        for col, (key, name, unit) in enumerate(METRICS):
+            ax = axes[row, col]
+            values = np.array([[c[key] for c in cells] for cells in report["cells"][label]])
+            if key == "final_spread":
+                shown = np.log10(np.maximum(values, 1e-3))
+                title = f"{name} (log10 {unit}, floor 1 mm)"
+            else:
+                shown, title = values, f"{name} [{unit}]"
+            low, high = limits[key]
+            image = ax.imshow(shown, origin="lower", aspect="auto", cmap="viridis", vmin=low, vmax=high)
+            fig.colorbar(image, ax=ax, fraction=0.046)
+            for i in range(len(losses)):
+                for k in range(len(latencies)):
+                    text = f"{values[i, k]:.2g}" if key != "collision_rate" else f"{values[i, k]:.0%}"
+                    light = (shown[i, k] - low) > 0.6 * (high - low)
+                    ax.text(k, i, text, ha="center", va="center", fontsize=7, color="black" if light else "white")
+            ax.set_xticks(range(len(latencies)), [f"{v:g}" for v in latencies])
+            ax.set_yticks(range(len(losses)), [f"{v:g}" for v in losses])
+            ax.set_xlabel("latency [s]")
+            ax.set_ylabel("loss probability")
+            ax.set_title(f"{label}: {title}", fontsize=9)
+    fig.suptitle(
+        f"Degradation of the reference policy, scenario {report['scenario']!r}, "
+        f"{report['episodes']} episode(s) per cell",
+        fontsize=11,
+    )
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return fig
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m baselines.sweep", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenario", default="paper", help=f"base scenario ({', '.join(sorted(SCENARIOS))})")
+    parser.add_argument("--loss", type=_floats, default=[0.0, 0.1, 0.3, 0.5, 0.7, 0.9], help="loss probabilities")
+    parser.add_argument("--latency", type=_floats, default=[0.0, 0.5, 1.0, 2.0, 4.0, 8.0], help="latencies [s]")
+    parser.add_argument(
+        "--policy",
+        action="append",
+        dest="policies",
+        help="reference[:extrapolate,ilos=σ]; repeatable (default: reference and reference:extrapolate)",
+    )
+    parser.add_argument("--episodes", type=int, default=3, help="episodes per cell and policy (default 3)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override")
+    parser.add_argument("--paper-initial-state", action="store_true", help="start from SPEC §5's initial state")
+    parser.add_argument("--out", type=Path, default=Path("results/sweep"), help="output prefix (.json/.md/.png)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
+    args = parser.parse_args(argv)
+    policies = args.policies or ["reference", "reference:extrapolate"]
+    for label in policies:
+        if label != "reference" and not label.startswith("reference:"):
+            parser.error(f"the sweep runs the reference policy (with options), got {label!r}")
+    try:
+        report = sweep(
+            args.scenario,
+            args.loss,
+            args.latency,
+            policies,
+            args.episodes,
+            args.seed,
+            parse_overrides(args.set),
+            args.paper_initial_state,
+            not args.quiet,
+        )
+    except (ValueError, KeyError, TypeError) as err:
+        parser.error(str(err))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    table = format_markdown(report)
+    args.out.with_suffix(".json").write_text(json.dumps(report, indent=2, allow_nan=False))
+    args.out.with_suffix(".md").write_text(table)
+    try:
+        plot_sweep(report, args.out.with_suffix(".png"))
+    except ImportError as err:
+        print(f"no figure: {err}", file=sys.stderr)
+    if not args.quiet:
+        print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
