@@ -60,12 +60,12 @@ BUILTIN_POLICIES = ("reference", "random")
 DEFAULT_ILOS_GAIN = 1.0
 
 
-def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
+def parse_overrides(items: Sequence[str], nest: bool = True) -> dict[str, Any]:
     """Parse ``KEY=VALUE`` strings; VALUE is a Python/JSON literal or a plain string.
 
     ``PARENT.FIELD=VALUE`` collects into ``{PARENT: {FIELD: VALUE}}``, which
     :func:`~marine_formation_env.scenarios.make_config` merges into the
-    scenario's setting field by field.
+    scenario's setting field by field (``nest=False`` keeps dotted keys as they are).
     """
     out: dict[str, Any] = {}
     for item in items:
@@ -80,7 +80,7 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
         except (ValueError, SyntaxError):
             value = text
         parent, dot, child = key.partition(".")
-        if dot:
+        if dot and nest:
             if not parent or not child or "." in child:
                 raise ValueError(f"--set expects KEY=VALUE or PARENT.FIELD=VALUE, got {item!r}")
             nested = out.setdefault(parent, {})

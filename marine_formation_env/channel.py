@@ -127,7 +127,8 @@ class ChannelConfig:
     """How messages travel between vessels (module docstring); the defaults are ideal links.
 
     Attributes:
-        loss: Bernoulli loss probability per link and message, in [0, 1].
+        loss: Bernoulli loss probability per link and message, in [0, 1]; or
+            an ``(n, n)`` matrix of them, ``loss[j][i]`` for the link i → j.
         burst: Gilbert–Elliott bursty loss instead of ``loss`` (a
             :class:`GilbertElliott` or a mapping of its fields); None: Bernoulli.
         latency: fixed delay from sending to arrival [s], ≥ 0.
@@ -154,7 +155,24 @@ class ChannelConfig:
     recovery_rate: float = 0.0
 
     def __post_init__(self) -> None:
-        _probability("channel", "loss", self.loss)
+        if isinstance(self.loss, (list, tuple, np.ndarray)):
+            try:
+                matrix = np.asarray(self.loss, dtype=float)
+            except (TypeError, ValueError):
+                raise ConfigError(
+                    f"channel.loss must be a probability or a matrix of them, got {self.loss!r}"
+                ) from None
+            if matrix.ndim != 2 or matrix.shape[0] != matrix.shape[1]:
+                raise ConfigError(f"channel.loss as a matrix must be square (n, n), got shape {matrix.shape}")
+            bad = np.argwhere(~((matrix >= 0) & (matrix <= 1)))
+            if bad.size:
+                j, i = bad[0]
+                raise ConfigError(
+                    f"channel.loss[{j}][{i}] must be a probability in [0, 1], got {matrix[j, i]!r} (link {i} → {j})"
+                )
+            object.__setattr__(self, "loss", tuple(tuple(float(v) for v in row) for row in matrix))
+        else:
+            _probability("channel", "loss", self.loss)
         if self.burst is not None and not isinstance(self.burst, GilbertElliott):
             if not isinstance(self.burst, dict):
                 raise ConfigError(f"channel.burst must be a GilbertElliott, a mapping or None, got {self.burst!r}")
@@ -163,7 +181,7 @@ class ChannelConfig:
             if unknown:
                 raise ConfigError(f"unknown channel.burst key(s) {unknown}; valid keys: {sorted(valid)}")
             object.__setattr__(self, "burst", GilbertElliott(**self.burst))
-        if self.burst is not None and self.loss > 0:
+        if self.burst is not None and np.any(np.asarray(self.loss) > 0):
             raise ConfigError(
                 f"give either channel.loss (Bernoulli, got {self.loss}) or channel.burst (Gilbert–Elliott), not both"
             )
@@ -201,11 +219,14 @@ class ChannelConfig:
         """Control periods per TDMA slot (requires ``tdma_slot``)."""
         return _multiple(self.tdma_slot, dt, "channel.tdma_slot")
 
-    def validate_timing(self, dt: float) -> None:
-        """Check that ``period`` and ``tdma_slot`` are multiples of the control period ``dt``."""
+    def validate(self, dt: float, n: int) -> None:
+        """Checks that need the scenario: ``period`` and ``tdma_slot`` are multiples
+        of the control period ``dt``; a loss matrix is ``(n, n)``."""
         self.period_steps(dt)
         if self.tdma_slot is not None:
             self.slot_steps(dt)
+        if isinstance(self.loss, tuple) and np.shape(self.loss) != (n, n):
+            raise ConfigError(f"channel.loss as a matrix must have shape ({n}, {n}), got {np.shape(self.loss)}")
 
 
 def _multiple(value: float, dt: float, name: str) -> int:
@@ -253,6 +274,7 @@ class LinkChannel:
         self._every = ch.slot_steps(self.dt) if self._tdma else ch.period_steps(self.dt)
         self._p_fail = -math.expm1(-ch.failure_rate * self.dt)
         self._p_recover = -math.expm1(-ch.recovery_rate * self.dt)
+        self._loss: Any = np.asarray(ch.loss) if isinstance(ch.loss, tuple) else ch.loss
         self._noise = config.sensor_noise.as_array()
         self._noisy = not config.sensor_noise.is_zero
         shape = (b, n, n)
@@ -359,7 +381,7 @@ class LinkChannel:
             self.bad[ids] = bad
             p_loss: Any = np.where(bad, ch.burst.loss_bad, ch.burst.loss_good)
         else:
-            p_loss = ch.loss
+            p_loss = self._loss
         delivered = send & (next(draws) >= p_loss)
         delay = ch.latency + (ch.jitter * next(draws) if ch.jitter > 0 else 0.0)
         delay_steps = np.ceil(delay / self.dt - 1e-9).astype(np.int64) if ch.max_delay > 0 else 0

@@ -436,7 +436,7 @@ class ScenarioConfig:
                 if not isinstance(value, Mapping):
                     raise ConfigError(f"{key} must be a {cls.__name__} or a mapping of its fields, got {value!r}")
                 set_(key, _build(cls, dict(value), key))
-        self.channel.validate_timing(self.dt)
+        self.channel.validate(self.dt, n)
         strongest = self.current.speed + self.current.amplitude
         if strongest >= self.u_min:
             raise ConfigError(

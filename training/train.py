@@ -166,14 +166,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             stored = yaml.safe_load(saved.read_text())[ENV_ID]
             seed = stored.pop("seed", args.seed)
             base = load_config(args.config) if args.config else stored
-            resolved = validate(apply_overrides(base, parse_overrides(args.set)))
+            resolved = validate(apply_overrides(base, parse_overrides(args.set, nest=False)))
         else:
             if args.config is None:
                 raise TrainConfigError("--config is required (unless --resume)")
             if (args.out / "model.zip").exists() or (args.out / "checkpoints").exists():
                 raise TrainConfigError(f"{args.out} already holds a run; use --resume or another --out")
             seed = args.seed
-            resolved = validate(apply_overrides(load_config(args.config), parse_overrides(args.set)))
+            resolved = validate(apply_overrides(load_config(args.config), parse_overrides(args.set, nest=False)))
     except (TrainConfigError, ValueError) as err:
         parser.error(str(err))
     args.out.mkdir(parents=True, exist_ok=True)
