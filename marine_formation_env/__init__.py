@@ -2,8 +2,10 @@
 
 A research environment built on "Formation Control of Underactuated Marine
 Vehicles with Communication Constraints": batched 3-DOF vessel dynamics, a
-directed communication graph that masks what each vessel observes, and a
-PettingZoo ParallelEnv whose agents act at the force, guidance or speed level.
+directed communication graph that masks what each vessel observes (over ideal
+links, as in the paper, or a lossy, delayed, scheduled channel), ocean
+currents, and a PettingZoo ParallelEnv whose agents act at the force, guidance
+or speed level.
 
 Quick start::
 
@@ -13,7 +15,9 @@ Quick start::
     observations, infos = env.reset(seed=0)
 """
 
+from marine_formation_env.channel import ChannelConfig, GilbertElliott
 from marine_formation_env.core import FormationCore
+from marine_formation_env.disturbances import Current, SensorNoise
 from marine_formation_env.env import MarineFormationParallelEnv, parallel_env
 from marine_formation_env.graph import GRAPH_PRESETS, CommGraph, GraphError, make_graph
 from marine_formation_env.params import SUPPLY, VESSELS, Gains, ParameterError, VesselParams
@@ -59,16 +63,20 @@ __all__ = [
     "SCENARIOS",
     "SUPPLY",
     "VESSELS",
+    "ChannelConfig",
     "CommGraph",
     "ConfigError",
+    "Current",
     "FormationCore",
     "Gains",
+    "GilbertElliott",
     "GraphError",
     "InitNoise",
     "MarineFormationParallelEnv",
     "ParameterError",
     "RewardConfig",
     "ScenarioConfig",
+    "SensorNoise",
     "SpeedProfile",
     "VesselParams",
     "make_config",

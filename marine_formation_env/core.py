@@ -606,6 +606,12 @@ class FormationCore:
                 slots[..., k] = feature
         return np.clip(out, self.obs_low, self.obs_high, out=out)
 
+    def links_up(self, b: int) -> np.ndarray:
+        """``(N, N)`` booleans of formation ``b``: ``[j, i]`` iff the link i → j exists now."""
+        if self.channel is None:
+            return self.config.graph.adjacency.copy()
+        return self.channel.up[b].copy()
+
     def global_state(self) -> np.ndarray:
         """``(B, N·6 + 1)`` float32: every vessel's state (ψ wrapped) and the time [s]."""
         s = self.state.copy()

@@ -85,10 +85,15 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | 4         | yaw rate r_j                             | rad/s  | −1       | 1       |
     | 5         | desired formation speed u_d(t)           | m/s    | U_min    | U_max   |
     | 6         | its rate u̇_d(t)                          | m/s²   | −ρ       | ρ       |
-    | 7 + 4k    | link bit: 1 iff i transmits to j         | –      | 0        | 1       |
+    | 7 + 4k    | link bit: 1 iff i transmits to j (now)   | –      | 0        | 1       |
     | 8 + 4k    | (x_j − D_xj) − (x_i − D_xi)              | m      | −X       | X       |
     | 9 + 4k    | ẋ_j − ẋ_i                                | m/s    | −39.6    | 39.6    |
     | 10 + 4k   | age of the received data (0: ideal link) | s      | 0        | horizon |
+
+    Over a non-ideal channel (next section) ``x_i`` and ``ẋ_i`` are those of
+    the last message received from ``i``, sent ``age`` seconds ago, and the
+    link bit is 1 iff the link exists now and has delivered a message since
+    reset; j's own quantities are always current.
 
     Y = workspace y-extent + max |D_y|; X = workspace x-length + spread of D_x;
     ρ = max(2π·amplitude/period of u_d, 0.1); 14 m/s and 1 rad/s are the
@@ -98,6 +103,24 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ``(x_i, ẋ_i)`` (SPEC §3), given relative to ``j``. ``state()`` returns the
     global state ``(n·6 + 1,)``: every vessel's ``x, y, ψ (wrapped), u, v, r``
     followed by the time [s], for centralized critics.
+
+    ## Communication channel, switching graphs, currents, sensor noise
+
+    The paper's links are ideal; the paper is motivated by acoustic modems
+    (errors, delay, little bandwidth) and shared radio channels. ``channel=``
+    (:class:`~marine_formation_env.channel.ChannelConfig` or a mapping)
+    puts a channel between what vessels transmit and what the others observe:
+    Bernoulli or Gilbert–Elliott loss per link, fixed plus random latency
+    (messages are time-stamped; none is seen before it could have arrived),
+    a transmission period or TDMA round robin on one shared channel, a range
+    limit and random link failures with recovery. ``topology_schedule=`` switches
+    among graphs periodically. ``current=`` adds an ocean current to the
+    kinematics (``u, v`` are then velocities through the water);
+    ``sensor_noise=`` adds noise to each vessel's measurement of itself. The
+    scenarios ``acoustic``, ``radio`` and ``current`` preset them (README,
+    "Beyond the paper"). The channel draws from its own stream, seeded with
+    the reset seed (or ``options={"channel_seed": k}``). With the defaults
+    nothing of this runs.
 
     ## Rewards
 
@@ -157,13 +180,22 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `gains`            | paper's              | `Gains(k_u, k_psi, k_r, delta, a)`                         |
     | `paper_as_printed` | False                | run (11) and (14) as printed (SPEC §3)                     |
     | `safety_distance`  | 5 m (`paper`: 0)     | collision distance (0 disables the check)                  |
+    | `channel`          | ideal links          | `ChannelConfig` or mapping (previous section)            |
+    | `topology_schedule`| none                 | ((dwell s, graph), …) repeated; replaces `topology`       |
+    | `current`          | still water          | `Current(speed, direction, amplitude, period)` or mapping  |
+    | `sensor_noise`     | none                 | `SensorNoise(position, heading, speed, yaw_rate)` std devs |
+
+    A mapping given for a nested setting updates the scenario's value field
+    by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
+    rest of the acoustic channel.
 
     All fields of :class:`~marine_formation_env.scenarios.ScenarioConfig`
     are accepted; an unknown key raises.
 
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release; channel, switching graphs, currents and sensor
+      noise added as options whose defaults leave the behaviour unchanged.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
@@ -287,7 +319,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             from marine_formation_env.render import FormationRenderer
 
             self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.core.state[0], float(self.core.time[0]))
+        return self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0))
 
     def close(self) -> None:
         if self._renderer is not None:

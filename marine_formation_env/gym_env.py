@@ -99,7 +99,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
             from marine_formation_env.render import FormationRenderer
 
             self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.core.state[0], float(self.core.time[0]))  # type: ignore[no-any-return]
+        return self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0))  # type: ignore[no-any-return]
 
     def close(self) -> None:
         if self._renderer is not None:

@@ -6,7 +6,10 @@ A fixed world camera shows the scenario's workspace box with:
 * the formation slots ``(x̄ + D_xj, D_yj)`` around the current mean along-track
   position ``x̄ = mean_k(x_k − D_xk)`` (hollow circles),
 * each vessel as an oriented hull polygon at true scale,
-* every communication link as an arrow from transmitter to receiver.
+* every communication link as an arrow from transmitter to receiver; over a
+  non-ideal channel, links that exist in the graph but are down right now
+  (out of range, failed, switched off) are drawn dotted and pale,
+* the ocean current, if any, in the title.
 """
 
 from __future__ import annotations
@@ -80,6 +83,7 @@ class FormationRenderer:
         self.human = human
         self.zoom_width = float(zoom_width)
         self._trail: list[np.ndarray] = []
+        self._links: np.ndarray | None = None  # links up now, set by draw()
         x_lo, x_hi, y_lo, y_hi = config.workspace
         width_in = width_px / 100.0
         world_h = float(np.clip(width_in * (y_hi - y_lo) / (x_hi - x_lo), 1.6, 0.5 * width_in))
@@ -99,9 +103,15 @@ class FormationRenderer:
         self.ax_world = self.fig.add_subplot(grid[0])
         self.ax_zoom = self.fig.add_subplot(grid[1])
 
-    def draw(self, state: np.ndarray, time: float) -> np.ndarray | None:
-        """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human."""
+    def draw(self, state: np.ndarray, time: float, links: np.ndarray | None = None) -> np.ndarray | None:
+        """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human.
+
+        ``links``: ``(n, n)`` booleans, ``links[j, i]`` iff the link i → j is up
+        now (:meth:`~marine_formation_env.core.FormationCore.links_up`); None:
+        every link of the graph.
+        """
         cfg = self.config
+        self._links = links
         if time == 0.0 or not self._trail:
             self._trail = []
         self._trail.append(np.array(state[:, :2]))
@@ -120,9 +130,13 @@ class FormationRenderer:
         ax.set_ylim(y_lo, y_hi)
         ax.set_aspect("equal", adjustable="box")
         ax.set_ylabel("y [m]")
+        sea = ""
+        if not cfg.current.is_zero:
+            vc_x, vc_y = cfg.current.velocity(time)
+            sea = f"   current {float(np.hypot(vc_x, vc_y)):.2f} m/s towards {np.degrees(cfg.current.direction):.0f}°"
         ax.set_title(
             f"{cfg.name} ({cfg.action_level})   t = {time:6.1f} s   coordination spread {spread:8.2f} m   "
-            f"max |y − D_y| {cross:7.2f} m",
+            f"max |y − D_y| {cross:7.2f} m{sea}",
             fontsize=9,
         )
 
@@ -166,15 +180,18 @@ class FormationRenderer:
         for j, (d_x, d_y) in enumerate(offsets):
             ax.add_patch(Circle((x_bar + d_x, d_y), 0.4 * length, fill=False, ec=vessel_color(j), lw=1.0))
         if link_arrows:
+            up = self._links
             for i, j in cfg.graph.links:  # i transmits to j
+                live = up is None or bool(up[j, i])
                 ax.add_patch(
                     FancyArrowPatch(
                         (float(state[i, 0]), float(state[i, 1])),
                         (float(state[j, 0]), float(state[j, 1])),
                         arrowstyle="-|>",
                         mutation_scale=12,
-                        color="0.3",
+                        color="0.3" if live else "0.75",
                         lw=1.0,
+                        ls="-" if live else ":",
                         shrinkA=10,
                         shrinkB=10,
                         connectionstyle="arc3,rad=0.15",

@@ -251,7 +251,7 @@ class MarineFormationVectorEnv(VectorEnv):
             from marine_formation_env.render import FormationRenderer
 
             self._renderer = FormationRenderer(self.config)
-        return (self._renderer.draw(self.core.state[0], float(self.core.time[0])),)
+        return (self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0)),)
 
     def close_extras(self, **kwargs: Any) -> None:
         self._renderer = None

@@ -65,3 +65,18 @@ def test_render_without_mode_warns_and_returns_none():
 def test_unknown_render_mode_raises():
     with pytest.raises(ValueError, match="'ansi'"):
         marine_formation_env.parallel_env("paper", render_mode="ansi")
+
+
+def test_links_that_are_down_are_drawn_differently():
+    """A range limit cuts the 0–2 link of a column (200 m apart); the frame differs from all links up."""
+    frames = []
+    for channel in ({"range": 1e9}, {"range": 150.0}):
+        env = marine_formation_env.parallel_env(
+            "paper", render_mode="rgb_array", formation="column", topology="complete", initial_state=None,
+            channel=channel,
+        )  # fmt: skip
+        env.reset(seed=0)
+        up = env.core.links_up(0)
+        frames.append(_frame_ok(env.render()))
+    assert not up[2, 0] and not up[0, 2] and up[1, 0] and up[2, 1]
+    assert not np.array_equal(frames[0], frames[1])
