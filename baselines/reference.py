@@ -31,8 +31,9 @@ Two options go beyond the paper (our extensions, off by default):
   ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)``, integrated once per control period.
   With an unknown constant current it drives the cross-track error to zero,
   where plain LOS settles off the path. The policy steers only at the
-  ``guidance`` and ``force`` levels (at ``speed`` the env's built-in plain LOS
-  steers), so the option needs one of those. At ``force`` the ILOS angle
+  ``guidance`` and ``force`` levels, so the option needs one of those; at
+  ``speed`` the env's built-in LOS steers, and the scenario's
+  ``los_integral_gain`` makes it integral LOS. At ``force`` the ILOS angle
   replaces ψ_LOS in (14); its feed-forward omits the integrator's slow
   contribution σ·ė_int. The integrators are state: call :meth:`reset` at
   every episode start (:func:`~baselines.rollout.run_episode` does).
@@ -81,8 +82,8 @@ class ReferencePolicy(BatchPolicy):
                 raise ValueError(f"integral_los must be a gain σ > 0 [m/s] or None, got {integral_los!r}")
             if config.action_level == "speed":
                 raise ValueError(
-                    "integral_los needs action_level 'guidance' or 'force': at 'speed' the env's built-in plain LOS "
-                    "steers and the policy only commands the speed"
+                    "integral_los needs action_level 'guidance' or 'force': at 'speed' the env's built-in LOS steers "
+                    "and the policy only commands the speed (set the scenario's los_integral_gain instead)"
                 )
         self.config = config
         self.layout = ObservationLayout(config.n_vessels)

@@ -127,6 +127,7 @@ def _kernel(  # type: ignore[no-untyped-def]
     tr_max,
     current,  # (speed, amplitude, ω, cos β, sin β) of the ocean current
     time0,  # (B,) time at the start of the period
+    steer_dy,  # (B, N) the path offset the built-in LOS steers to (D_y, shifted by integral LOS)
     offsets,  # (N, 2)
     slot_index,  # (N, N-1)
     slot_mask,  # (N, N-1) float
@@ -165,7 +166,7 @@ def _kernel(  # type: ignore[no-untyped-def]
             )
             c0, c1, uc0 = cmd[b, j, 0], cmd[b, j, 1], u_c0[b, j]
             uc_dot = (c0 - uc0) / dt
-            d_y = offsets[j, 1]
+            d_y = steer_dy[b, j]
             sea = (time0[b], current[0], current[1], current[2], current[3], current[4])
             for k in range(substeps):
                 t = k * h

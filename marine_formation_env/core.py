@@ -239,6 +239,8 @@ class FormationCore:
         )
         self.channel = None if config.ideal_observations else LinkChannel(config, self.num_envs)
         self._measured: np.ndarray | None = None  # with sensor noise only
+        self._los_sigma = config.los_integral_gain
+        self.los_integral = np.zeros((self.num_envs, n))  # e_int of integral LOS [s] (speed level)
         self._kernel_args: tuple[Any, ...] | None = None
         if self.backend == "numba":
             from marine_formation_env import _numba
@@ -392,6 +394,7 @@ class FormationCore:
         self.time[ids] = 0.0
         self.steps[ids] = 0
         self._fresh[ids] = True  # the first command after a reset is held, not ramped
+        self.los_integral[ids] = 0.0
         if self.channel is not None:
             index = np.arange(self.num_envs)[ids]
             self.channel.reset(index)
@@ -438,6 +441,7 @@ class FormationCore:
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
             self._fresh[:] = False
+        e_start = self.state[..., Y] - self._dy if self._los_sigma > 0 else None
         if self._kernel_args is not None:
             out = self._step_compiled(clipped, commands)
         else:
@@ -454,7 +458,19 @@ class FormationCore:
             out = self._outputs(clipped, commands.get("u_c"))
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
+        if e_start is not None:  # integral LOS: one Euler step of ė_int = Δ·e/((e + σ·e_int)² + Δ²)
+            delta, z = cfg.gains.delta, e_start + self._los_sigma * self.los_integral
+            self.los_integral = self.los_integral + cfg.dt * delta * e_start / (z * z + delta * delta)
         return out
+
+    def _steer_dy(self) -> np.ndarray:
+        """The path offset the speed level's LOS steers to: ``D_y``, or ``D_y − σ·e_int`` (integral LOS).
+
+        LOS on ``e + σ·e_int`` with ``e = y − D_y`` is LOS on ``y − (D_y − σ·e_int)``.
+        """
+        if self._los_sigma > 0:
+            return self._dy - self._los_sigma * self.los_integral  # type: ignore[no-any-return]
+        return self._dy
 
     def _step_compiled(self, actions: np.ndarray, commands: dict[str, np.ndarray]) -> StepOutput:
         """The same step as the numpy path, in one fused numba kernel (``backend="numba"``)."""
@@ -467,7 +483,7 @@ class FormationCore:
             cmd[..., 0] = commands["u_c"]
             if cfg.action_level == "guidance":
                 cmd[..., 1] = commands["psi_d"]
-        time0 = self.time
+        time0, steer_dy = self.time, np.ascontiguousarray(np.broadcast_to(self._steer_dy(), (b, n)))
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
         obs = np.empty((b, n, self.layout.dim), dtype=np.float32)
@@ -481,6 +497,7 @@ class FormationCore:
             self._last_u_c,
             *self._kernel_args,
             time0,
+            steer_dy,
             *self._kernel_geometry,
             np.asarray(cfg.u_d.value(self.time), dtype=float),
             np.asarray(cfg.u_d.rate(self.time), dtype=float),
@@ -542,7 +559,7 @@ class FormationCore:
                 return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc, sea(t))
 
             return rhs_guidance
-        dy = self._dy
+        dy = self._steer_dy()
 
         def rhs_speed(t: float, s: np.ndarray) -> np.ndarray:
             psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]

@@ -250,6 +250,13 @@ class ScenarioConfig:
             allowed speed could not hold its path.
         sensor_noise: noise on each vessel's measurement of itself
             (:class:`SensorNoise` or a mapping).
+        los_integral_gain: σ [m/s] of integral LOS in the ``speed`` level's
+            built-in path follower (our extension, Børhaug, Pavlov and
+            Pettersen, CDC 2008): it steers on ``e + σ·e_int`` with
+            ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)``, integrated once per control
+            period, which removes the steady cross-track error a current
+            leaves. 0: the paper's LOS (12). Choose σ above the largest cross
+            current. Only at ``speed``; at the other levels the policy steers.
     """
 
     name: str = "custom"
@@ -282,6 +289,7 @@ class ScenarioConfig:
     current: Any = field(default_factory=Current)
     sensor_noise: Any = field(default_factory=SensorNoise)
     topology_schedule: Any = ()
+    los_integral_gain: float = 0.0
 
     def __post_init__(self) -> None:
         set_ = lambda key, value: object.__setattr__(self, key, value)
@@ -437,6 +445,12 @@ class ScenarioConfig:
                     raise ConfigError(f"{key} must be a {cls.__name__} or a mapping of its fields, got {value!r}")
                 set_(key, _build(cls, dict(value), key))
         self.channel.validate(self.dt, n)
+        check_number("scenario", "los_integral_gain", self.los_integral_gain)
+        if self.los_integral_gain > 0 and self.action_level != "speed":
+            raise ConfigError(
+                f"los_integral_gain = {self.los_integral_gain} applies to the speed level's built-in LOS; at "
+                f"action_level {self.action_level!r} the policy steers (ReferencePolicy(env, integral_los=σ) does ILOS)"
+            )
         strongest = self.current.speed + self.current.amplitude
         if strongest >= self.u_min:
             raise ConfigError(

@@ -121,6 +121,21 @@ def test_integral_los_drives_the_cross_track_error_to_zero(level):
     assert ilos["success"]  # course over ground along the path, speeds u = u_d
 
 
+def test_integral_los_in_the_speed_levels_path_follower():
+    """The scenario's los_integral_gain makes the built-in LOS integral: the policy only coordinates."""
+    _, plain, _ = _final_cross_track("speed")
+    env = marine_formation_env.parallel_env("current", los_integral_gain=1.0)
+    traj = run_episode(env, ReferencePolicy(env), seed=0)
+    ilos = episode_metrics(traj, env.config)
+    assert plain["final_cross_track_max"] > 8.0
+    assert ilos["final_cross_track_max"] < 0.05 and ilos["success"]
+    # in still water the equilibrium is the paper's (e = 0, e_int = 0); the integrator
+    # charged during the transient drains slowly (7.8 mm left at 400 s)
+    still = marine_formation_env.parallel_env("paper", los_integral_gain=1.0)
+    m = episode_metrics(run_episode(still, ReferencePolicy(still), seed=0), still.config)
+    assert m["final_cross_track_max"] < 0.05 and m["final_coordination_spread"] < 1e-6 and m["success"]
+
+
 def test_integral_los_needs_a_steering_level_and_a_positive_gain():
     env = marine_formation_env.parallel_env("current")
     with pytest.raises(ValueError, match="integral_los needs action_level 'guidance' or 'force'"):
@@ -150,6 +165,13 @@ def test_integral_los_state_resets_between_episodes():
 def test_malformed_currents_raise_clear_errors(current, match):
     with pytest.raises(ConfigError, match=match):
         make_config("paper", current=current)
+
+
+def test_los_integral_gain_is_validated():
+    with pytest.raises(ConfigError, match=r"scenario.los_integral_gain must be a finite number ≥ 0, got -1"):
+        make_config("current", los_integral_gain=-1.0)
+    with pytest.raises(ConfigError, match="applies to the speed level's built-in LOS; at action_level 'guidance'"):
+        make_config("current", action_level="guidance", los_integral_gain=1.0)
 
 
 def test_malformed_sensor_noise_raises():
