@@ -395,8 +395,8 @@ class FormationCore:
         self.steps[ids] = 0
         self._fresh[ids] = True  # the first command after a reset is held, not ramped
         self.los_integral[ids] = 0.0
-        if self.channel is not None:
-            index = np.arange(self.num_envs)[ids]
+        index = np.arange(self.num_envs)[ids]
+        if self.channel is not None and len(index):
             self.channel.reset(index)
             self._sense(index)
         return self.observe(ids)

@@ -9,6 +9,7 @@ then, and what the receiver's observation must therefore show.
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -469,3 +470,34 @@ def test_presets_are_scenarios_with_their_documented_numbers():
     slower = make_config("acoustic", channel={"latency": 3.0})
     assert slower.channel.latency == 3.0 and slower.channel.tdma_slot == 4.0
     assert marine_formation_env.parallel_env(scenario="acoustic").config.channel == acoustic.channel
+
+
+def test_gymnasium_checker_passes_on_the_acoustic_preset():
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+
+    env = gymnasium.make("MarineFormation-v0", scenario="acoustic", horizon=30.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+
+
+def test_vector_autoreset_restarts_the_channel():
+    """After an autoreset nothing of the previous episode arrives: every held message is younger than the episode."""
+    venv = MarineFormationVectorEnv(num_envs=2, scenario="acoustic", horizon=10.0, autoreset_mode="SameStep")
+    venv.reset(seed=0)
+    layout = ObservationLayout(3)
+    resets = 0
+    for _ in range(60):
+        obs, _, terminated, truncated, _ = venv.step(np.zeros(venv.action_space.shape))
+        resets += int(np.sum(terminated | truncated))
+        _, slots = layout.split(obs.reshape(2, 3, -1))
+        for b in range(2):
+            elapsed = venv.core.time[b]
+            linked = slots[b, ..., 0] == 1
+            assert np.all(slots[b, ..., 3][linked] <= elapsed + 1e-6)
+            if elapsed == 0.0:  # just reset: with 1-2 s latency nothing can have arrived yet
+                assert not slots[b].any()
+    assert resets >= 4
+    empty = FormationCore(venv.config, 2)
+    empty.reset(venv.config.initial_state, env_ids=np.array([], dtype=int))  # resetting no formation is fine
