@@ -148,14 +148,15 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
     raise ValueError(f"unknown policy {spec!r}; known policies: {list(BUILTIN_POLICIES)} or a saved model (.zip)")
 
 
-def _progress(total: int, enabled: bool) -> Any:
+def progress_bar(total: int, enabled: bool, desc: str = "episodes") -> Any:
+    """A tqdm bar over ``total`` episodes on stderr, or None (disabled, or tqdm not installed)."""
     if not enabled:
         return None
     try:
         from tqdm import tqdm
     except ImportError:
         return None
-    return tqdm(total=total, desc="episodes", unit="ep", file=sys.stderr)
+    return tqdm(total=total, desc=desc, unit="ep", file=sys.stderr)
 
 
 def evaluate(
@@ -202,7 +203,7 @@ def evaluate(
         "policies": {},
     }
     first: dict[str, Trajectory] = {}
-    bar = _progress(len(policies) * episodes, progress)
+    bar = progress_bar(len(policies) * episodes, progress)
     for label in policies:
         policy = make_policy(label, env, seed, loaded)
         per_episode = []

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.evaluate import make_policy, parse_overrides
+from baselines.evaluate import make_policy, parse_overrides, progress_bar
 from baselines.metrics import episode_metrics
 from baselines.rollout import run_episode
 from marine_formation_env.env import parallel_env
@@ -97,15 +97,7 @@ def sweep(
         base.setdefault("safety_distance", 5.0)
     channel_override = dict(base.pop("channel", {}) or {})
     cells: dict[str, list[list[dict[str, Any]]]] = {p: [] for p in policies}
-    bar = None
-    if progress:
-        try:
-            from tqdm import tqdm
-
-            total = len(losses) * len(latencies) * len(policies) * episodes
-            bar = tqdm(total=total, desc="sweep", unit="ep", file=sys.stderr)
-        except ImportError:
-            bar = None
+    bar = progress_bar(len(losses) * len(latencies) * len(policies) * episodes, progress, desc="sweep")
     config = None
     for p in losses:
         rows = {label: [] for label in policies}  # type: dict[str, list[dict[str, Any]]]
