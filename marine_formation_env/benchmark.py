@@ -67,10 +67,10 @@ def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -
 
 
 # ------------------------------------------------------------------ our cases
-def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto") -> dict[str, Any]:
+def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto", scenario: str = "paper") -> dict[str, Any]:
     from marine_formation_env.env import parallel_env
 
-    env = parallel_env("paper", action_level="force", backend=backend)
+    env = parallel_env(scenario, action_level="force", backend=backend)
     rng = np.random.default_rng(0)
     pool = [{a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents} for _ in range(ACTION_POOL)]
     env.reset(seed=0)
@@ -83,10 +83,12 @@ def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto") -> d
     return _time_steps(step, min_seconds, repeats)
 
 
-def _ours_batched(b: int, min_seconds: float, repeats: int, backend: str = "auto") -> dict[str, Any]:
+def _ours_batched(
+    b: int, min_seconds: float, repeats: int, backend: str = "auto", scenario: str = "paper"
+) -> dict[str, Any]:
     from marine_formation_env.vector import MarineFormationVectorEnv
 
-    env = MarineFormationVectorEnv(num_envs=b, scenario="paper", action_level="force", backend=backend)
+    env = MarineFormationVectorEnv(num_envs=b, scenario=scenario, action_level="force", backend=backend)
     rng = np.random.default_rng(0)
     pool = [rng.uniform(-1, 1, env.action_space.shape).astype(np.float32) for _ in range(8)]
     env.reset(seed=0)
@@ -145,6 +147,10 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
             out = _ours_parallel(min_seconds, repeats, backend="numpy")
         elif case == "ours_numpy_batched":
             out = _ours_batched(b, min_seconds, repeats, backend="numpy")
+        elif case == "ours_acoustic_parallel":
+            out = _ours_parallel(min_seconds, repeats, scenario="acoustic")
+        elif case == "ours_acoustic_batched":
+            out = _ours_batched(b, min_seconds, repeats, scenario="acoustic")
         elif case == "mpe2_parallel":
             out = _mpe2_parallel(min_seconds, repeats)
         elif case == "ours_batched":
@@ -256,6 +262,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
         "parallel": {
             "ours": _subprocess_case("ours_parallel", 1, min_seconds, repeats),
             "ours_numpy": _subprocess_case("ours_numpy_parallel", 1, min_seconds, repeats),
+            "ours_acoustic": _subprocess_case("ours_acoustic_parallel", 1, min_seconds, repeats),
             "mpe2": _subprocess_case("mpe2_parallel", 1, min_seconds, repeats),
         },
         "batched": {},
@@ -264,6 +271,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
         report["batched"][str(b)] = {
             "ours": _subprocess_case("ours_batched", b, min_seconds, repeats),
             "ours_numpy": _subprocess_case("ours_numpy_batched", b, min_seconds, repeats),
+            "ours_acoustic": _subprocess_case("ours_acoustic_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
         }
     ops = count_vessel_step_ops("force")
@@ -311,6 +319,22 @@ def format_report(report: dict[str, Any]) -> str:
             f"| batched B = {b} vs VMAS simple_spread (env-steps/s) | {rate(row['ours'], key)} | "
             f"{rate(row['vmas'], key)} | {ratio(row['ours'], row['vmas'], key)} | {rate(row['ours_numpy'], key)} | "
             f"{ratio(row['ours_numpy'], row['vmas'], key)} | {mem(row['ours'])} | {mem(row['vmas'])} |"
+        )
+    lines += [
+        "",
+        "The `acoustic` channel (TDMA, latency, bursty loss, range; observations through the channel):",
+        "",
+        "| case | ideal links [steps/s] | acoustic [steps/s] | acoustic / ideal | acoustic / peer |",
+        "|---|---|---|---|---|",
+        f"| ParallelEnv | {rate(par['ours'], 'steps_per_s')} | {rate(par['ours_acoustic'], 'steps_per_s')} | "
+        f"{ratio(par['ours_acoustic'], par['ours'], 'steps_per_s')} | "
+        f"{ratio(par['ours_acoustic'], par['mpe2'], 'steps_per_s')} |",
+    ]
+    for b, row in report["batched"].items():
+        key = "env_steps_per_s"
+        lines.append(
+            f"| batched B = {b} (env-steps/s) | {rate(row['ours'], key)} | {rate(row['ours_acoustic'], key)} | "
+            f"{ratio(row['ours_acoustic'], row['ours'], key)} | {ratio(row['ours_acoustic'], row['vmas'], key)} |"
         )
     ar = report["arithmetic"]
     lines.append("")

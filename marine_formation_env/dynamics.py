@@ -96,12 +96,13 @@ def vessel_derivatives(
     tau_u: Any,
     tau_r: Any,
     acc: tuple[Any, Any, Any] | None = None,
-    vc_x: Any = 0.0,
-    vc_y: Any = 0.0,
+    vc_x: Any = None,
+    vc_y: Any = None,
 ) -> tuple[Any, Any, Any, Any, Any, Any]:
     """Eqs. (1)-(4) component by component: ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
 
-    With an ocean current ``(vc_x, vc_y)`` [m/s] (inertial frame), ``u, v`` are
+    With an ocean current ``(vc_x, vc_y)`` [m/s] (inertial frame; None: still
+    water), ``u, v`` are
     the velocities *relative to the water* and the kinematics become
     ``η̇ = R(ψ)·ν_r + V_c`` (Børhaug, Pavlov, Pettersen, CDC 2008). For an
     irrotational constant current the kinetics in relative velocities are
@@ -113,7 +114,10 @@ def vessel_derivatives(
     """
     c, s = np.cos(psi), np.sin(psi)
     a_u, v_dot, a_r = accelerations(p, u, v, r) if acc is None else acc
-    return u * c - v * s + vc_x, u * s + v * c + vc_y, r, a_u + tau_u, v_dot, a_r + tau_r
+    x_dot, y_dot = u * c - v * s, u * s + v * c
+    if vc_x is not None and vc_y is not None:
+        x_dot, y_dot = x_dot + vc_x, y_dot + vc_y
+    return x_dot, y_dot, r, a_u + tau_u, v_dot, a_r + tau_r
 
 
 def vessel_rhs(
@@ -139,7 +143,7 @@ def vessel_rhs(
         ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.
     """
     out = np.empty_like(state)
-    vc_x, vc_y = (0.0, 0.0) if current is None else current
+    vc_x, vc_y = (None, None) if current is None else current
     derivs = vessel_derivatives(
         p, state[..., PSI], state[..., U], state[..., V], state[..., R], tau_u, tau_r, acc, vc_x, vc_y
     )
