@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import ast
 import json
+import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -314,6 +315,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_comparison(first, cfg, args.plot, title=f"{report['scenario']} ({cfg.action_level}), seed {args.seed}")
             for k, (label, traj) in enumerate(first.items()):
                 name = Path(label).parent.name if is_model_path(label) else label
+                name = re.sub(r"[^A-Za-z0-9_.=-]+", "_", name)  # "reference:ilos" → "reference_ilos"
                 path = args.plot.with_name(f"{args.plot.stem}_{k}_{name}{args.plot.suffix}")
                 plot_episode(traj, cfg, path, title=f"{report['scenario']}: policy {label!r}, seed {args.seed}")
     return 0
