@@ -41,9 +41,13 @@ observations are those of the ideal links; with a configuration that exists
 but does not impair (zero loss, zero latency, every period, unlimited range)
 the channel path reproduces them bit for bit (tests/test_channel.py).
 
-Randomness comes only from the channel stream: one ``np.random.Generator``
-per formation, separate from the initial-state generator, seeded at reset by
-the front end (:func:`channel_generator`). It also draws the sensor noise.
+Randomness comes only from the channel stream of each formation, separate
+from its initial-state generator and seeded at reset by the front end
+(:func:`channel_streams`): one ``np.random.Generator`` of uniforms for the
+channel and one of normals for the sensor noise. They are served in blocks
+(:class:`BlockStream`: one generator call per formation every few steps, not
+every step), which changes the cost, not the numbers: a formation sees the same
+sequence whatever the batch size.
 """
 
 from __future__ import annotations
@@ -59,22 +63,64 @@ from marine_formation_env.errors import ConfigError, check_number
 if TYPE_CHECKING:
     from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ChannelConfig", "GilbertElliott", "LinkChannel", "channel_generator"]
+__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams"]
 
 #: Spawn key that separates the channel stream from the initial-state stream of one seed.
 CHANNEL_STREAM_KEY = 0x43484E
 
 
-def channel_generator(seed: int | None) -> np.random.Generator:
-    """The channel stream for a reset seed: independent of ``np.random.default_rng(seed)``.
+def channel_streams(seed: int | None) -> tuple[np.random.Generator, np.random.Generator]:
+    """The channel's generators for a reset seed: ``(uniforms, normals)``.
 
-    ``None`` draws fresh entropy.
+    Both are independent of ``np.random.default_rng(seed)`` (the initial-state
+    stream of the same seed) and of each other. ``None`` draws fresh entropy.
     """
-    if seed is None:
-        return np.random.default_rng()
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
         raise ValueError(f"a channel seed must be an integer ≥ 0 or None, got {seed!r}")
-    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(CHANNEL_STREAM_KEY,)))
+    root = np.random.SeedSequence(None if seed is None else int(seed), spawn_key=(CHANNEL_STREAM_KEY,))
+    uniform, normal = root.spawn(2)
+    return np.random.default_rng(uniform), np.random.default_rng(normal)
+
+
+class BlockStream:
+    """Per-formation random streams, drawn a block of rows at a time.
+
+    Row ``k`` of formation ``b`` is the ``k``-th ``width`` numbers of its
+    generator, whatever the block size: a generator's ``random`` and
+    ``standard_normal`` give the same sequence in one call or in many. Blocks
+    only save generator calls (one per formation every ``block`` rows). The
+    block size keeps the buffer under ``max_floats`` numbers.
+
+    Args:
+        num_envs: formations ``B``.
+        width: numbers per row.
+        normal: standard normals instead of uniforms in [0, 1).
+        max_floats: buffer budget; ``block = clip(max_floats // (B·width), 1, 64)``.
+    """
+
+    def __init__(self, num_envs: int, width: int, normal: bool = False, max_floats: int = 4_000_000) -> None:
+        self.width = width
+        self.normal = normal
+        self.block = int(np.clip(max_floats // max(1, num_envs * width), 1, 64))
+        self.generators = [np.random.default_rng() for _ in range(num_envs)]
+        self.buffer = np.empty((num_envs, self.block, width))
+        self.pos = np.full(num_envs, self.block)  # every block starts empty
+
+    def seed(self, b: int, generator: np.random.Generator) -> None:
+        """Give formation ``b`` a new generator (its unread numbers are dropped)."""
+        self.generators[b] = generator
+        self.pos[b] = self.block
+
+    def take(self, ids: np.ndarray) -> np.ndarray:
+        """The next row of each formation in ``ids``: ``(len(ids), width)``."""
+        for b in ids[self.pos[ids] >= self.block]:
+            gen = self.generators[b]
+            shape = (self.block, self.width)
+            self.buffer[b] = gen.standard_normal(shape) if self.normal else gen.random(shape)
+            self.pos[b] = 0
+        rows = self.buffer[ids, self.pos[ids]]
+        self.pos[ids] += 1
+        return rows
 
 
 def _probability(owner: str, key: str, value: Any) -> None:
@@ -291,7 +337,8 @@ class LinkChannel:
         self._pend_theta = np.zeros(deep)
         self._pend_xdot = np.zeros(deep)
         self._pend_time = np.zeros(deep)
-        self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(b)]
+        self.uniforms = BlockStream(b, self.draws_per_link * n * n)
+        self.normals = BlockStream(b, 6 * n, normal=True) if self._noisy else None
 
     # ------------------------------------------------------------------ draws
     @property
@@ -300,16 +347,23 @@ class LinkChannel:
         ch = self.channel
         return 1 + int(ch.failure_rate > 0 or ch.recovery_rate > 0) + int(ch.burst is not None) + int(ch.jitter > 0)
 
+    def seed(self, b: int, seed: int | None) -> None:
+        """Seed formation ``b``'s channel stream (:func:`channel_streams`)."""
+        uniform, normal = channel_streams(seed)
+        self.uniforms.seed(b, uniform)
+        if self.normals is not None:
+            self.normals.seed(b, normal)
+
     def _uniforms(self, ids: np.ndarray) -> np.ndarray:
-        """``(draws_per_link, len(ids), N, N)`` uniforms, one generator call per formation."""
-        shape = (self.draws_per_link, self.n, self.n)
-        return np.stack([self.rngs[b].random(shape) for b in ids], axis=1)
+        """``(draws_per_link, len(ids), N, N)`` uniforms: one row of each formation's stream."""
+        rows = self.uniforms.take(ids).reshape(len(ids), self.draws_per_link, self.n, self.n)
+        return rows.transpose(1, 0, 2, 3)
 
     def measurement_noise(self, ids: np.ndarray) -> np.ndarray | None:
         """``(len(ids), N, 6)`` Gaussian sensor noise for the state columns, or None without noise."""
-        if not self._noisy:
+        if self.normals is None:
             return None
-        return np.stack([self.rngs[b].standard_normal((self.n, 6)) for b in ids]) * self._noise
+        return self.normals.take(ids).reshape(len(ids), self.n, 6) * self._noise
 
     # ----------------------------------------------------------------- update
     def graph_at(self, time: np.ndarray) -> np.ndarray:
@@ -335,7 +389,7 @@ class LinkChannel:
         self._pend_valid[:, ids] = False
         burst = self.channel.burst
         if burst is not None:
-            self.bad[ids] = np.stack([self.rngs[b].random((self.n, self.n)) < burst.p_bad for b in ids])
+            self.bad[ids] = self._uniforms(ids)[0] < burst.p_bad
 
     def update(
         self,
@@ -357,6 +411,7 @@ class LinkChannel:
             positions: ``(m, N, 2)`` true positions [m] (for ``range``).
         """
         ch = self.channel
+        rows = self._rows(ids)
         draws = iter(self._uniforms(ids))
         up = self.graph_at(time).copy()
         if math.isfinite(ch.range):
@@ -364,21 +419,21 @@ class LinkChannel:
             up &= np.hypot(gap[..., 0], gap[..., 1]) <= ch.range
         if ch.failure_rate > 0 or ch.recovery_rate > 0:
             r = next(draws)
-            failed = self.failed[ids]
+            failed = self.failed[rows]
             fresh = (np.asarray(steps) == 0)[:, None, None]  # every link is live at reset
             failed = np.where(fresh, False, np.where(failed, r >= self._p_recover, r < self._p_fail))
-            self.failed[ids] = failed
+            self.failed[rows] = failed
             up &= ~failed
-        self.up[ids] = up
+        self.up[rows] = up
         tx = self.transmitters(steps)
-        self.transmitted[ids] = tx
+        self.transmitted[rows] = tx
         send = up & tx[:, None, :]
         if ch.burst is not None:
             r = next(draws)
-            bad = self.bad[ids]
+            bad = self.bad[rows]
             moved = np.where(bad, r >= ch.burst.p_bad_to_good, r < ch.burst.p_good_to_bad)
             bad = np.where(send, moved, bad)
-            self.bad[ids] = bad
+            self.bad[rows] = bad
             p_loss: Any = np.where(bad, ch.burst.loss_bad, ch.burst.loss_good)
         else:
             p_loss = self._loss
@@ -395,18 +450,24 @@ class LinkChannel:
             self._pend_xdot[where] = xdot[sel_b, sel_i]
             self._pend_time[where] = time[sel_b]
         # arrivals at this instant (zero-delay messages sent just now included)
-        now = (np.mod(steps, self.depth), ids)
+        k = np.mod(steps, self.depth)
+        now: tuple[Any, Any] = (int(k[0]), rows) if k.min() == k.max() else (k, ids)  # a view when in step
         arrived = self._pend_valid[now]
         if arrived.any():
-            newer = arrived & (~self.has_message[ids] | (self._pend_time[now] > self.held_time[ids]))
+            has, held_time = self.has_message[rows], self.held_time[rows]
+            newer = arrived & (~has | (self._pend_time[now] > held_time))
             for held, pend in (
                 (self.held_theta, self._pend_theta),
                 (self.held_xdot, self._pend_xdot),
                 (self.held_time, self._pend_time),
             ):
-                held[ids] = np.where(newer, pend[now], held[ids])
-            self.has_message[ids] |= newer
+                held[rows] = np.where(newer, pend[now], held[rows])
+            self.has_message[rows] = has | newer
             self._pend_valid[now] = False
+
+    def _rows(self, ids: np.ndarray) -> Any:
+        """Index of formations ``ids`` (distinct, increasing): a slice (views, no copies) when it is all of them."""
+        return slice(None) if len(ids) == self.num_envs else ids
 
     def slots(
         self, ids: Any, slot_index: np.ndarray, time: np.ndarray, theta: np.ndarray, xdot: np.ndarray
@@ -415,8 +476,10 @@ class LinkChannel:
 
         ``theta``/``xdot`` are the receivers' own measured values now.
         """
-        rows = np.arange(self.n)[:, None]
-        pick = (slice(None), rows, slot_index)
+        if not isinstance(ids, slice):
+            ids = self._rows(np.asarray(ids))
+        receivers = np.arange(self.n)[:, None]
+        pick = (slice(None), receivers, slot_index)
         linked = (self.up[ids] & self.has_message[ids])[pick].astype(float)
         d_theta = linked * (theta[:, :, None] - self.held_theta[ids][pick])
         d_xdot = linked * (xdot[:, :, None] - self.held_xdot[ids][pick])

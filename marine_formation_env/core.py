@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from marine_formation_env.channel import LinkChannel, channel_generator
+from marine_formation_env.channel import LinkChannel
 from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
 from marine_formation_env.dynamics import (
     PSI,
@@ -368,7 +368,7 @@ class FormationCore:
             return
         for b, seed in zip(index, seeds, strict=True):
             if seed is not None:
-                self.channel.rngs[b] = channel_generator(seed)
+                self.channel.seed(int(b), int(seed))
 
     def reset(self, initial_state: np.ndarray, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
         """Set the state of formations ``env_ids`` (all if None) and return their observations.

@@ -16,7 +16,7 @@ import pytest
 
 import marine_formation_env
 from baselines import ReferencePolicy
-from marine_formation_env.channel import ChannelConfig, GilbertElliott, channel_generator
+from marine_formation_env.channel import BlockStream, ChannelConfig, GilbertElliott, channel_streams
 from marine_formation_env.core import FormationCore, ObservationLayout
 from marine_formation_env.graph import CommGraph
 from marine_formation_env.scenarios import ConfigError, make_config
@@ -318,7 +318,9 @@ def test_channel_seeds_reproduce_runs_and_differ_between_seeds():
 
 
 def test_channel_stream_is_separate_from_the_initial_state_stream():
-    assert not np.array_equal(channel_generator(4).random(5), np.random.default_rng(4).random(5))
+    uniform, normal = channel_streams(4)
+    assert not np.array_equal(uniform.random(5), np.random.default_rng(4).random(5))
+    assert not np.array_equal(normal.random(5), channel_streams(4)[0].random(5))
     # an impaired channel does not change the initial states drawn from the same seed
     noisy = {"init_noise": {"x": 30.0}, "initial_state": None}
     e1 = marine_formation_env.parallel_env("paper", **noisy)
@@ -328,12 +330,32 @@ def test_channel_stream_is_separate_from_the_initial_state_stream():
     assert np.array_equal(e1.vessel_states, e2.vessel_states)
 
 
+@pytest.mark.parametrize("normal", [False, True])
+def test_block_streams_serve_the_same_numbers_whatever_the_block_size(normal):
+    streams = [BlockStream(3, 5, normal=normal, max_floats=m) for m in (1, 40, 10**6)]
+    assert [s.block for s in streams] == [1, 2, 64]
+    for s in streams:
+        for b in range(3):
+            s.seed(b, np.random.default_rng(100 + b))
+    rng = np.random.default_rng(0)
+    for _ in range(150):  # formations advance unevenly, as with resets
+        ids = np.flatnonzero(rng.random(3) < 0.7)
+        rows = [s.take(ids) for s in streams]
+        assert np.array_equal(rows[0], rows[1]) and np.array_equal(rows[0], rows[2])
+    first = BlockStream(1, 5, normal=normal)
+    first.seed(0, np.random.default_rng(100))
+    direct = np.random.default_rng(100)
+    expected = direct.standard_normal((2, 5)) if normal else direct.random((2, 5))
+    assert np.array_equal(np.concatenate([first.take(np.array([0])), first.take(np.array([0]))]), expected)
+
+
 def test_vector_env_formation_reproduces_the_parallel_env_with_its_seed():
     b = 3
-    venv = MarineFormationVectorEnv(num_envs=b, scenario="acoustic", layout="joint")
+    noise = {"sensor_noise": {"position": 1.0, "speed": 0.05}}
+    venv = MarineFormationVectorEnv(num_envs=b, scenario="acoustic", layout="joint", **noise)
     obs_v, _ = venv.reset(seed=20)
     policy = ReferencePolicy(venv.config)
-    singles = [marine_formation_env.parallel_env("acoustic") for _ in range(b)]
+    singles = [marine_formation_env.parallel_env("acoustic", **noise) for _ in range(b)]
     obs_s = [env.reset(seed=20 + k)[0] for k, env in enumerate(singles)]
     for _ in range(60):
         for k in range(b):
