@@ -110,46 +110,52 @@ def test_loss_probability_one_everywhere_empties_every_slot():
 @pytest.mark.parametrize("p", [0.2, 0.6])
 def test_bernoulli_loss_rate_and_runs(p):
     """Per message lost with probability p: loss fraction p, runs of losses of mean length 1/(1−p)."""
-    cfg = make_config("paper", topology="complete", horizon=2000.0, channel={"loss": p, **TRANSPARENT})
-    lost = _loss_indicator(cfg, 3000)
-    assert lost.mean() == pytest.approx(p, abs=4 * math.sqrt(p * (1 - p) / lost.size) + 1e-3)
-    runs = _run_lengths(lost)
+    cfg = make_config("paper", topology="complete", channel={"loss": p, **TRANSPARENT})
+    rows = _loss_indicator(cfg, 300)
+    lost = np.concatenate(rows)
+    assert lost.mean() == pytest.approx(p, abs=4 * math.sqrt(p * (1 - p) / lost.size))
+    runs = _run_lengths(rows)
     assert runs.mean() == pytest.approx(1 / (1 - p), rel=0.08)
 
 
 def test_gilbert_elliott_loss_rate_and_burst_length():
     """Bad spells (all lost) last 1/p_bad_to_good messages on average; long-run loss = stationary P(bad)."""
     ge = GilbertElliott(p_good_to_bad=0.05, p_bad_to_good=0.25, loss_good=0.0, loss_bad=1.0)
-    cfg = make_config("paper", topology="complete", horizon=4000.0, channel={"burst": ge, **TRANSPARENT})
-    lost = _loss_indicator(cfg, 7000)
+    cfg = make_config("paper", topology="complete", channel={"burst": ge, **TRANSPARENT})
+    rows = _loss_indicator(cfg, 500, b=24)
     assert ge.mean_loss == pytest.approx(0.05 / 0.30)
-    assert lost.mean() == pytest.approx(ge.mean_loss, abs=0.02)
-    assert _run_lengths(lost).mean() == pytest.approx(1 / 0.25, rel=0.1)
+    assert np.concatenate(rows).mean() == pytest.approx(ge.mean_loss, abs=0.02)
+    runs = _run_lengths(rows)
+    assert runs.mean() == pytest.approx(1 / 0.25, rel=0.1)
     # bursty: far longer runs than independent loss at the same rate (1/(1−p) ≈ 1.2)
-    assert _run_lengths(lost).mean() > 3.0
+    assert runs.mean() > 3.0
 
 
-def _loss_indicator(cfg, steps):
-    """(links·steps) booleans: at every step after the first message, was this step's message lost?
+def _loss_indicator(cfg, steps, b=16):
+    """One row per (formation, link), in time order: was this period's message lost?
 
     With zero latency and a message every period, a delivered message shows
-    age 0 in the slot at once; an older age means this period's message was lost.
+    age 0 in the slot at once; an older age means this period's message was
+    lost. Rows start at each link's first delivery (before it nothing is known).
     """
-    _, obs, _, _ = _run_core(cfg, steps)
-    slots = _slots(cfg, obs)[:, 0]  # (T+1, N, N−1, 4)
+    _, obs, _, _ = _run_core(cfg, steps, b=b)
+    slots = _slots(cfg, obs)  # (T+1, B, N, N−1, 4)
     linked, age = slots[..., 0], slots[..., 3]
-    seen = np.maximum.accumulate(linked, axis=0) > 0
-    lost = np.where(seen, age > 0, True)
-    return lost[1:].reshape(len(lost) - 1, -1).T  # one row per link, in time order
+    lost = (age > 0).reshape(len(age), -1).T
+    first = np.argmax(linked.reshape(len(linked), -1).T > 0, axis=1)
+    return [row[k + 1 :] for row, k in zip(lost, first, strict=True)]
 
 
-def _run_lengths(lost_rows):
+def _run_lengths(rows):
+    """Lengths of the runs of True in each row, without the runs cut by a row's ends."""
     lengths = []
-    for row in np.atleast_2d(lost_rows):
-        padded = np.concatenate([[0], row.astype(int), [0]])
+    for row in rows:
+        padded = np.concatenate([[0], np.asarray(row, dtype=int), [0]])
         edges = np.flatnonzero(np.diff(padded))
-        lengths.extend(edges[1::2] - edges[::2])
-    return np.array(lengths[1:-1] if len(lengths) > 2 else lengths, dtype=float)
+        starts, ends = edges[::2], edges[1::2]
+        inside = (starts > 0) & (ends < len(row))
+        lengths.extend((ends - starts)[inside])
+    return np.array(lengths, dtype=float)
 
 
 # ------------------------------------------------------------ latency and ages
@@ -287,11 +293,12 @@ def test_switching_schedule_sets_the_links():
 def test_random_link_failures_and_recovery():
     """Down fraction of a link → λ/(λ+μ) (per period: p_f/(p_f+p_r)); mean down time 1/μ."""
     lam, mu = 0.05, 0.2
-    cfg = make_config("paper", topology="complete", horizon=4000.0, channel={"failure_rate": lam, "recovery_rate": mu})
-    _, obs, _, _ = _run_core(cfg, 8000)
-    down = _slots(cfg, obs)[1:, 0, ..., 0] == 0
+    cfg = make_config("paper", topology="complete", channel={"failure_rate": lam, "recovery_rate": mu})
+    _, obs, _, _ = _run_core(cfg, 500, b=48)
+    down = _slots(cfg, obs)[1:, ..., 0] == 0
     p_f, p_r = -math.expm1(-lam * 0.5), -math.expm1(-mu * 0.5)
-    assert down.mean() == pytest.approx(p_f / (p_f + p_r), abs=0.03)
+    # every link starts live: skip the first 100 periods (p_f + p_r ≈ 0.12 per period: long mixed)
+    assert down[100:].mean() == pytest.approx(p_f / (p_f + p_r), abs=0.03)
     runs = _run_lengths(down.reshape(len(down), -1).T)
     assert runs.mean() * 0.5 == pytest.approx(0.5 / p_r, rel=0.12)
 
@@ -367,9 +374,9 @@ def test_vector_env_formation_reproduces_the_parallel_env_with_its_seed():
 
 def test_sensor_noise_statistics_and_that_only_observations_are_noisy():
     cfg = make_config("paper", sensor_noise={"position": 2.0, "heading": 0.01, "speed": 0.1, "yaw_rate": 0.001})
-    states, obs, _, _ = _run_core(cfg, 2000, b=2)
+    states, obs, _, _ = _run_core(cfg, 250, b=16)
     clean = make_config("paper")
-    s_clean, o_clean, _, _ = _run_core(clean, 2000, b=2)
+    s_clean, o_clean, _, _ = _run_core(clean, 250, b=16)
     assert np.array_equal(states, s_clean)  # the physics does not see the noise (random actions, same seed)
     own_err = obs[..., :5].astype(float) - o_clean[..., :5].astype(float)
     np.testing.assert_allclose(own_err.std(axis=(0, 1, 2)), [2.0, 0.01, 0.1, 0.1, 0.001], rtol=0.05)
