@@ -304,21 +304,22 @@ def format_report(report: dict[str, Any]) -> str:
     def ratio(a: dict[str, Any], b: dict[str, Any], key: str) -> str:
         return f"{a[key] / b[key]:.2f}" if key in a and key in b else "n/a"
 
+    # (label, our measurements, the peer's, the rate key): one row of each table per case
+    cases = [("ParallelEnv vs MPE2 simple_spread_v3", par, par["mpe2"], "steps_per_s")]
+    cases += [
+        (f"batched B = {b} vs VMAS simple_spread (env-steps/s)", row, row["vmas"], "env_steps_per_s")
+        for b, row in report["batched"].items()
+    ]
     lines = [
         "| case | ours [steps/s] | peer [steps/s] | ours / peer | ours, numpy backend | numpy / peer "
         "| ours peak RSS [MB] | peer peak RSS [MB] |",
         "|---|---|---|---|---|---|---|---|",
-        f"| ParallelEnv vs MPE2 simple_spread_v3 | {rate(par['ours'], 'steps_per_s')} | "
-        f"{rate(par['mpe2'], 'steps_per_s')} | {ratio(par['ours'], par['mpe2'], 'steps_per_s')} | "
-        f"{rate(par['ours_numpy'], 'steps_per_s')} | {ratio(par['ours_numpy'], par['mpe2'], 'steps_per_s')} | "
-        f"{mem(par['ours'])} | {mem(par['mpe2'])} |",
     ]
-    for b, row in report["batched"].items():
-        key = "env_steps_per_s"
+    for label, ours, peer, key in cases:
         lines.append(
-            f"| batched B = {b} vs VMAS simple_spread (env-steps/s) | {rate(row['ours'], key)} | "
-            f"{rate(row['vmas'], key)} | {ratio(row['ours'], row['vmas'], key)} | {rate(row['ours_numpy'], key)} | "
-            f"{ratio(row['ours_numpy'], row['vmas'], key)} | {mem(row['ours'])} | {mem(row['vmas'])} |"
+            f"| {label} | {rate(ours['ours'], key)} | {rate(peer, key)} | {ratio(ours['ours'], peer, key)} | "
+            f"{rate(ours['ours_numpy'], key)} | {ratio(ours['ours_numpy'], peer, key)} | {mem(ours['ours'])} | "
+            f"{mem(peer)} |"
         )
     lines += [
         "",
@@ -326,15 +327,11 @@ def format_report(report: dict[str, Any]) -> str:
         "",
         "| case | ideal links [steps/s] | acoustic [steps/s] | acoustic / ideal | acoustic / peer |",
         "|---|---|---|---|---|",
-        f"| ParallelEnv | {rate(par['ours'], 'steps_per_s')} | {rate(par['ours_acoustic'], 'steps_per_s')} | "
-        f"{ratio(par['ours_acoustic'], par['ours'], 'steps_per_s')} | "
-        f"{ratio(par['ours_acoustic'], par['mpe2'], 'steps_per_s')} |",
     ]
-    for b, row in report["batched"].items():
-        key = "env_steps_per_s"
+    for label, ours, peer, key in cases:
         lines.append(
-            f"| batched B = {b} (env-steps/s) | {rate(row['ours'], key)} | {rate(row['ours_acoustic'], key)} | "
-            f"{ratio(row['ours_acoustic'], row['ours'], key)} | {ratio(row['ours_acoustic'], row['vmas'], key)} |"
+            f"| {label} | {rate(ours['ours'], key)} | {rate(ours['ours_acoustic'], key)} | "
+            f"{ratio(ours['ours_acoustic'], ours['ours'], key)} | {ratio(ours['ours_acoustic'], peer, key)} |"
         )
     ar = report["arithmetic"]
     lines.append("")
