@@ -291,8 +291,9 @@ class LinkChannel:
 
     Arrays are indexed ``[b, j, i]`` for the link ``i → j`` (receiver ``j``,
     sender ``i``), like ``A[j, i]`` of the graph. The pending ring buffer has
-    one slot per possible delay in control periods; messages sharing an
-    arrival instant on one link keep only the newest.
+    one slot per possible delay in control periods, up to the episode's length
+    (a message that would arrive after the last step of an episode is
+    dropped); messages sharing an arrival instant on one link keep only the newest.
 
     Attributes:
         up: ``(B, N, N)`` the link exists now.
@@ -309,7 +310,10 @@ class LinkChannel:
         self.dt = config.dt
         n, b = config.n_vessels, num_envs
         self.n, self.num_envs = n, b
-        self.depth = math.ceil(ch.max_delay / self.dt - 1e-9) + 1
+        # one ring slot per possible delay in control periods; a message that would
+        # arrive after the episode's last step is never seen, so delays are capped there
+        self.max_delay_steps = min(math.ceil(ch.max_delay / self.dt - 1e-9), config.max_steps)
+        self.depth = self.max_delay_steps + 1
         if config.topology_schedule:
             self._graphs = np.stack([g.adjacency for _, g in config.topology_schedule])
             self._ends = np.cumsum([dwell for dwell, _ in config.topology_schedule])
@@ -440,6 +444,7 @@ class LinkChannel:
         delivered = send & (next(draws) >= p_loss)
         delay = ch.latency + (ch.jitter * next(draws) if ch.jitter > 0 else 0.0)
         delay_steps = np.ceil(delay / self.dt - 1e-9).astype(np.int64) if ch.max_delay > 0 else 0
+        delivered &= delay_steps <= self.max_delay_steps  # later than the episode's end: never seen
         arrival_slot = np.mod(np.asarray(steps)[:, None, None] + delay_steps, self.depth)
         sel_b, sel_j, sel_i = np.nonzero(delivered)
         if sel_b.size:

@@ -530,3 +530,10 @@ def test_vector_autoreset_restarts_the_channel():
     assert resets >= 4
     empty = FormationCore(venv.config, 2)
     empty.reset(venv.config.initial_state, env_ids=np.array([], dtype=int))  # resetting no formation is fine
+
+
+def test_latency_longer_than_the_episode_delivers_nothing_and_costs_no_memory():
+    cfg = make_config("paper", horizon=20.0, channel={"latency": 1e6})
+    _, obs, _, core = _run_core(cfg, 60)  # past the horizon too (the core keeps stepping)
+    assert core.channel.depth == cfg.max_steps + 1
+    assert not np.any(_slots(cfg, obs))
