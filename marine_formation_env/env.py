@@ -184,6 +184,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `topology_schedule`| none                 | ((dwell s, graph), …) repeated; replaces `topology`       |
     | `current`          | still water          | `Current(speed, direction, amplitude, period)` or mapping  |
     | `sensor_noise`     | none                 | `SensorNoise(position, heading, speed, yaw_rate)` std devs |
+    | `los_integral_gain`| 0 (plain LOS)        | σ [m/s]: integral LOS in the `speed` level's path follower |
 
     A mapping given for a nested setting updates the scenario's value field
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
