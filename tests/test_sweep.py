@@ -92,12 +92,21 @@ def test_presets_pass_the_pettingzoo_api_test(scenario):
     parallel_api_test(env, num_cycles=150)
 
 
-def test_channel_observations_stay_inside_the_observation_space():
+def test_no_message_is_seen_before_it_could_have_arrived():
+    """Acoustic TDMA with a 20 s latency: every held message is at least 20 s old, and nothing arrives before 20 s."""
     env = marine_formation_env.parallel_env("acoustic", channel={"latency": 20.0})
     space = env.observation_space("vessel_0")
     obs, _ = env.reset(seed=1)
+    seen = 0
     for _ in range(200):
         obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
         for o in obs.values():
             assert space.contains(o)
-            assert np.all(o[7 + 3 :: 4] >= 0)  # ages
+            linked, ages = o[7::4], o[10::4]
+            assert np.all(ages[linked == 0] == 0)
+            fresh = ages[linked == 1]
+            assert np.all(fresh >= 20.0)
+            seen += fresh.size
+        if env.time < 20.0:
+            assert all(not o[7::4].any() for o in obs.values())
+    assert seen > 0
