@@ -21,8 +21,10 @@ Two layouts of the same simulation:
 
 Formation ``b`` is seeded with ``seed + b`` (``reset(seed=int)``) or
 ``seed[b]`` (a list of B seeds), so it reproduces a single
-``parallel_env``/``gymnasium.make`` env reset with that seed, step for step; its
-generator then carries on across autoresets, as a single env's does.
+``parallel_env``/``gymnasium.make`` env reset with that seed, step for step,
+its channel's luck included (loss, delays, sensor noise: a separate stream
+seeded from the same seed); its generators then carry on across autoresets,
+as a single env's do.
 
 Autoreset follows Gymnasium's modes (``metadata["autoreset_mode"]``):
 ``NEXT_STEP`` (default) resets a finished formation on the following ``step``
