@@ -53,7 +53,7 @@ from baselines.rollout import RandomPolicy, Trajectory, run_episode
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import SCENARIOS, ScenarioConfig
 
-__all__ = ["evaluate", "main", "make_policy", "parse_overrides"]
+__all__ = ["evaluate", "is_reference", "main", "make_policy", "parse_overrides", "reference_options"]
 
 BUILTIN_POLICIES = ("reference", "random")
 
@@ -93,6 +93,11 @@ def parse_overrides(items: Sequence[str], nest: bool = True) -> dict[str, Any]:
     return out
 
 
+def is_reference(spec: str) -> bool:
+    """Whether a ``--policy`` value names the reference policy, with or without options."""
+    return spec == "reference" or spec.startswith("reference:")
+
+
 def reference_options(spec: str) -> dict[str, Any]:
     """Keyword arguments of :class:`ReferencePolicy` from ``reference[:opt,opt=value]``."""
     _, _, raw = spec.partition(":")
@@ -113,7 +118,7 @@ def reference_options(spec: str) -> dict[str, Any]:
 
 def is_model_path(spec: str) -> bool:
     """Whether a ``--policy`` value names a saved model rather than a built-in policy."""
-    builtin = spec in BUILTIN_POLICIES or spec.startswith("reference:")
+    builtin = spec in BUILTIN_POLICIES or is_reference(spec)
     return not builtin and (spec.endswith(".zip") or Path(spec).is_dir())
 
 
@@ -130,7 +135,7 @@ def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
 
 def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
     """Build a policy from its command-line name (or a loaded model)."""
-    if spec == "reference" or spec.startswith("reference:"):
+    if is_reference(spec):
         return ReferencePolicy(env, **reference_options(spec))
     if spec == "random":
         return RandomPolicy(env, seed=seed)

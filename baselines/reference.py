@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import BatchPolicy
-from marine_formation_env.control import consensus_speed, los_angle, path_following_inputs
+from marine_formation_env.control import consensus_speed, integral_los_rate, los_angle, path_following_inputs
 from marine_formation_env.core import ObservationLayout, normalized_actions
 from marine_formation_env.scenarios import ScenarioConfig
 
@@ -102,12 +102,12 @@ class ReferencePolicy(BatchPolicy):
         """
         if self.integral_los is None:
             return e
-        sigma, delta = self.integral_los, self.config.gains.delta
         if self._e_int is None or self._e_int.shape != e.shape:
             self._e_int = np.zeros_like(e)
-        z = e + sigma * self._e_int
+        z = e + self.integral_los * self._e_int
         if advance:
-            self._e_int = self._e_int + self.config.dt * delta * e / (z * z + delta * delta)
+            rate = integral_los_rate(e, self._e_int, self.integral_los, self.config.gains.delta)
+            self._e_int = self._e_int + self.config.dt * rate
         return z
 
     def commands(self, obs: np.ndarray, advance: bool = False) -> dict[str, np.ndarray]:

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.evaluate import make_policy, parse_overrides, progress_bar
+from baselines.evaluate import is_reference, make_policy, parse_overrides, progress_bar
 from baselines.metrics import episode_metrics
 from baselines.rollout import run_episode
 from marine_formation_env.env import parallel_env
@@ -100,7 +100,8 @@ def sweep(
     bar = progress_bar(len(losses) * len(latencies) * len(policies) * episodes, progress, desc="sweep")
     config = None
     for p in losses:
-        rows = {label: [] for label in policies}  # type: dict[str, list[dict[str, Any]]]
+        for label in policies:
+            cells[label].append([])  # the row of loss p
         for latency in latencies:
             channel = {**channel_override, "loss": p, "latency": latency, "burst": None}
             env = parallel_env(scenario, **base, channel=channel)
@@ -112,10 +113,8 @@ def sweep(
                     results.append(episode_metrics(run_episode(env, policy, seed=seed + k), env.config))
                     if bar is not None:
                         bar.update(1)
-                rows[label].append(_cell(results, env.config.horizon))
+                cells[label][-1].append(_cell(results, env.config.horizon))
             env.close()
-        for label in policies:
-            cells[label].append(rows[label])
     if bar is not None:
         bar.close()
     assert config is not None
@@ -229,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     policies = args.policies or ["reference", "reference:extrapolate"]
     for label in policies:
-        if label != "reference" and not label.startswith("reference:"):
+        if not is_reference(label):
             parser.error(f"the sweep runs the reference policy (with options), got {label!r}")
     try:
         report = sweep(

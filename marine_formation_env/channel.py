@@ -53,12 +53,13 @@ sequence whatever the batch size.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from marine_formation_env.errors import ConfigError, check_number
+from marine_formation_env.errors import ConfigError, build_config, check_number
 
 if TYPE_CHECKING:
     from marine_formation_env.scenarios import ScenarioConfig
@@ -220,13 +221,9 @@ class ChannelConfig:
         else:
             _probability("channel", "loss", self.loss)
         if self.burst is not None and not isinstance(self.burst, GilbertElliott):
-            if not isinstance(self.burst, dict):
+            if not isinstance(self.burst, Mapping):
                 raise ConfigError(f"channel.burst must be a GilbertElliott, a mapping or None, got {self.burst!r}")
-            valid = set(GilbertElliott.__dataclass_fields__)
-            unknown = sorted(set(self.burst) - valid)
-            if unknown:
-                raise ConfigError(f"unknown channel.burst key(s) {unknown}; valid keys: {sorted(valid)}")
-            object.__setattr__(self, "burst", GilbertElliott(**self.burst))
+            object.__setattr__(self, "burst", build_config(GilbertElliott, self.burst, "channel.burst"))
         if self.burst is not None and np.any(np.asarray(self.loss) > 0):
             raise ConfigError(
                 f"give either channel.loss (Bernoulli, got {self.loss}) or channel.burst (Gilbert–Elliott), not both"
@@ -305,7 +302,6 @@ class LinkChannel:
 
     def __init__(self, config: ScenarioConfig, num_envs: int) -> None:
         ch = config.channel
-        self.config = config
         self.channel: ChannelConfig = ch
         self.dt = config.dt
         n, b = config.n_vessels, num_envs

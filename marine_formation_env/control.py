@@ -34,6 +34,7 @@ __all__ = [
     "consensus_speed",
     "heading_tracking_inputs",
     "heading_yaw_reference",
+    "integral_los_rate",
     "los_angle",
     "los_yaw_reference",
     "path_following_inputs",
@@ -81,6 +82,22 @@ def consensus_speed(
 def los_angle(e: np.ndarray, delta: float) -> np.ndarray:
     """LOS guidance (12): ``ψ_LOS = −atan(e/Δ)`` [rad], ``e = y − D_y`` [m]."""
     return -np.arctan(e / delta)
+
+
+def integral_los_rate(e: np.ndarray, e_int: np.ndarray, sigma: float, delta: float) -> np.ndarray:
+    """Integral LOS (Børhaug, Pavlov, Pettersen, CDC 2008; our extension of (12)).
+
+    LOS then steers on ``e + σ·e_int`` instead of ``e``, and the integrator
+    moves at ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)`` (returned). Its fixed point
+    needs ``e = 0``, which removes the offset a constant current leaves.
+
+    Args:
+        e: cross-track error [m]; e_int: the integrator [s].
+        sigma: integral gain σ [m/s] (above the largest cross current).
+        delta: look-ahead distance Δ [m].
+    """
+    z = e + sigma * e_int
+    return delta * e / (z * z + delta * delta)
 
 
 def surge_law(

@@ -49,7 +49,7 @@ import numpy as np
 from gymnasium import spaces
 
 from marine_formation_env.channel import LinkChannel
-from marine_formation_env.control import heading_tracking_inputs, path_following_inputs
+from marine_formation_env.control import heading_tracking_inputs, integral_los_rate, path_following_inputs
 from marine_formation_env.dynamics import (
     PSI,
     R,
@@ -259,6 +259,7 @@ class FormationCore:
                 config.tau_r_max,
                 np.array(config.current.coefficients),
             )
+            self._kernel_steer_dy = np.ascontiguousarray(np.broadcast_to(self._dy, (self.num_envs, n)))
             self._kernel_geometry = (
                 np.ascontiguousarray(config.formation),
                 self._slot_index,
@@ -458,9 +459,9 @@ class FormationCore:
             out = self._outputs(clipped, commands.get("u_c"))
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
-        if e_start is not None:  # integral LOS: one Euler step of ė_int = Δ·e/((e + σ·e_int)² + Δ²)
-            delta, z = cfg.gains.delta, e_start + self._los_sigma * self.los_integral
-            self.los_integral = self.los_integral + cfg.dt * delta * e_start / (z * z + delta * delta)
+        if e_start is not None:  # integral LOS: one Euler step of its integrator per control period
+            rate = integral_los_rate(e_start, self.los_integral, self._los_sigma, cfg.gains.delta)
+            self.los_integral = self.los_integral + cfg.dt * rate
         return out
 
     def _steer_dy(self) -> np.ndarray:
@@ -483,7 +484,7 @@ class FormationCore:
             cmd[..., 0] = commands["u_c"]
             if cfg.action_level == "guidance":
                 cmd[..., 1] = commands["psi_d"]
-        time0, steer_dy = self.time, np.ascontiguousarray(np.broadcast_to(self._steer_dy(), (b, n)))
+        time0, steer_dy = self.time, self._kernel_steer_dy if self._los_sigma == 0 else self._steer_dy()
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
         obs = np.empty((b, n, self.layout.dim), dtype=np.float32)
@@ -592,7 +593,7 @@ class FormationCore:
         theta = s[..., X] - self._dx
         x_dot = u * np.cos(psi) - v * np.sin(psi)
         if inertial and self._current is not None:
-            x_dot = x_dot + self._current_at(np.asarray(time))(0.0)[0]  # type: ignore[index]
+            x_dot = x_dot + current_velocity(*self._current, np.asarray(time)[:, None])[0]
         return theta, x_dot
 
     def observe(self, env_ids: np.ndarray | slice | None = None) -> np.ndarray:

@@ -131,7 +131,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
                     + 1.0·c(θ_j − mean_k θ_k; 20 m) + 0.5·c(ẋ_j − u_d; 1 m/s)
                     + 0.0·mean(a²) ]
 
-    Weights and scales are ``reward=RewardConfig(...)`` fields. If the
+    ``ẋ_j = u_j cos ψ_j − v_j sin ψ_j`` is the along-path speed through the
+    water (with a current the vessel is carried on top of it; the rewards, like
+    the paper's goals, ask for u_d relative to the water). Weights and scales
+    are ``reward=RewardConfig(...)`` fields. If the
     formation terminates early, every vessel also receives
     ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
     so ending an episode never pays. ``infos[agent]["reward_components"]``

@@ -83,7 +83,6 @@ class FormationRenderer:
         self.human = human
         self.zoom_width = float(zoom_width)
         self._trail: list[np.ndarray] = []
-        self._links: np.ndarray | None = None  # links up now, set by draw()
         x_lo, x_hi, y_lo, y_hi = config.workspace
         width_in = width_px / 100.0
         world_h = float(np.clip(width_in * (y_hi - y_lo) / (x_hi - x_lo), 1.6, 0.5 * width_in))
@@ -111,7 +110,6 @@ class FormationRenderer:
         every link of the graph.
         """
         cfg = self.config
-        self._links = links
         if time == 0.0 or not self._trail:
             self._trail = []
         self._trail.append(np.array(state[:, :2]))
@@ -123,7 +121,7 @@ class FormationRenderer:
 
         ax = self.ax_world
         ax.clear()
-        self._draw_scene(ax, state, link_arrows=False)
+        self._draw_scene(ax, state)
         for j in range(cfg.n_vessels):
             ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8)
         ax.set_xlim(x_lo, x_hi)
@@ -142,7 +140,7 @@ class FormationRenderer:
 
         ax = self.ax_zoom
         ax.clear()
-        self._draw_scene(ax, state, link_arrows=True)
+        self._draw_scene(ax, state, link_arrows=True, links=links)
         for j in range(cfg.n_vessels):
             ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8, alpha=0.6)
         cx, cy = float(np.mean(state[:, 0])), float(np.mean(offsets[:, 1]))
@@ -167,7 +165,9 @@ class FormationRenderer:
         rgba = np.asarray(self.fig.canvas.buffer_rgba())  # type: ignore[attr-defined]
         return np.array(rgba[..., :3])
 
-    def _draw_scene(self, ax: Any, state: np.ndarray, link_arrows: bool) -> None:
+    def _draw_scene(
+        self, ax: Any, state: np.ndarray, link_arrows: bool = False, links: np.ndarray | None = None
+    ) -> None:
         from matplotlib.patches import Circle, FancyArrowPatch, Polygon
 
         cfg = self.config
@@ -180,9 +180,8 @@ class FormationRenderer:
         for j, (d_x, d_y) in enumerate(offsets):
             ax.add_patch(Circle((x_bar + d_x, d_y), 0.4 * length, fill=False, ec=vessel_color(j), lw=1.0))
         if link_arrows:
-            up = self._links
             for i, j in cfg.graph.links:  # i transmits to j
-                live = up is None or bool(up[j, i])
+                live = links is None or bool(links[j, i])
                 ax.add_patch(
                     FancyArrowPatch(
                         (float(state[i, 0]), float(state[i, 1])),

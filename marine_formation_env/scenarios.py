@@ -22,7 +22,7 @@ import numpy as np
 
 from marine_formation_env.channel import ChannelConfig, GilbertElliott
 from marine_formation_env.disturbances import Current, SensorNoise
-from marine_formation_env.errors import ConfigError, check_number
+from marine_formation_env.errors import ConfigError, build_config, check_number
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
 
@@ -103,9 +103,7 @@ class SpeedProfile:
 
     def __post_init__(self) -> None:
         for key in ("mean", "amplitude", "period"):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ConfigError(f"u_d.{key} must be a finite number, got {value!r}")
+            check_number("u_d", key, getattr(self, key), minimum=None)
         if self.amplitude < 0 or self.period <= 0:
             raise ConfigError(
                 f"u_d needs amplitude ≥ 0 and period > 0, got amplitude={self.amplitude}, period={self.period}"
@@ -141,13 +139,7 @@ class InitNoise:
 
     def __post_init__(self) -> None:
         for key in ("x", "y", "psi", "u"):
-            value = getattr(self, key)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value >= 0)
-            ):
-                raise ConfigError(f"init_noise.{key} must be a finite number ≥ 0, got {value!r}")
+            check_number("init_noise", key, getattr(self, key))
 
     def as_array(self) -> np.ndarray:
         """Half-widths for the state columns ``x, y, psi, u, v, r`` (v, r: 0)."""
@@ -185,12 +177,7 @@ class RewardConfig:
             if f.name == "terminal_penalty":
                 continue
             value = getattr(self, f.name)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not (math.isfinite(value) and value >= 0)
-            ):
-                raise ConfigError(f"reward.{f.name} must be a finite number ≥ 0, got {value!r}")
+            check_number("reward", f.name, value)
             if f.name.startswith("sigma_") and value == 0:
                 raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
 
@@ -341,7 +328,7 @@ class ScenarioConfig:
         set_("vessel", vessel)
         if not isinstance(self.gains, Gains):
             if isinstance(self.gains, Mapping):
-                set_("gains", _build(Gains, self.gains, "gains"))
+                set_("gains", build_config(Gains, self.gains, "gains"))
             else:
                 raise ConfigError(f"gains must be a Gains or a mapping, got {self.gains!r}")
         for key in (
@@ -365,7 +352,7 @@ class ScenarioConfig:
         if isinstance(self.u_d, SpeedProfile):
             profile = self.u_d
         elif isinstance(self.u_d, Mapping):
-            profile = _build(SpeedProfile, self.u_d, "u_d")
+            profile = build_config(SpeedProfile, self.u_d, "u_d")
         else:
             profile = SpeedProfile(mean=self.u_d)
         set_("u_d", profile)
@@ -404,7 +391,7 @@ class ScenarioConfig:
         noise = self.init_noise
         if not isinstance(noise, InitNoise):
             if isinstance(noise, Mapping):
-                noise = _build(InitNoise, noise, "init_noise")
+                noise = build_config(InitNoise, noise, "init_noise")
             else:
                 values = _float_array(noise, "init_noise", (4,))
                 noise = InitNoise(*map(float, values))
@@ -419,7 +406,7 @@ class ScenarioConfig:
 
         if not isinstance(self.reward, RewardConfig):
             if isinstance(self.reward, Mapping):
-                set_("reward", _build(RewardConfig, self.reward, "reward"))
+                set_("reward", build_config(RewardConfig, self.reward, "reward"))
             else:
                 raise ConfigError(f"reward must be a RewardConfig or a mapping, got {self.reward!r}")
 
@@ -443,7 +430,7 @@ class ScenarioConfig:
             if not isinstance(value, cls):
                 if not isinstance(value, Mapping):
                     raise ConfigError(f"{key} must be a {cls.__name__} or a mapping of its fields, got {value!r}")
-                set_(key, _build(cls, dict(value), key))
+                set_(key, build_config(cls, dict(value), key))
         self.channel.validate(self.dt, n)
         check_number("scenario", "los_integral_gain", self.los_integral_gain)
         if self.los_integral_gain > 0 and self.action_level != "speed":
@@ -568,17 +555,6 @@ def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
-def _build(cls: type, values: Mapping[str, Any], name: str) -> Any:
-    names = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(values) - names)
-    if unknown:
-        raise ConfigError(f"unknown {name} key(s) {unknown}; valid keys: {sorted(names)}")
-    try:
-        return cls(**values)
-    except ParameterError as err:
-        raise ConfigError(str(err)) from None
-
-
 #: The paper's scenario (SPEC §5).
 _PAPER: dict[str, Any] = {
     "name": "paper",
@@ -678,12 +654,8 @@ def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
         if current is None and callable(factory):
             current = factory()
         if isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
-            merged = {f.name: getattr(current, f.name) for f in dataclasses.fields(current)}
-            unknown = sorted(set(value) - set(merged))
-            if unknown:
-                raise ConfigError(f"unknown {key} key(s) {unknown}; valid keys: {sorted(merged)}")
-            merged.update(value)
-            base[key] = merged
+            # unknown keys are reported when ScenarioConfig builds the merged mapping
+            base[key] = {**{f.name: getattr(current, f.name) for f in dataclasses.fields(current)}, **value}
         else:
             base[key] = value
     return ScenarioConfig(**base)
