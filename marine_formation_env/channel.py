@@ -215,7 +215,8 @@ class ChannelConfig:
             if bad.size:
                 j, i = bad[0]
                 raise ConfigError(
-                    f"channel.loss[{j}][{i}] must be a probability in [0, 1], got {matrix[j, i]!r} (link {i} → {j})"
+                    f"channel.loss[{j}][{i}] must be a probability in [0, 1], got {float(matrix[j, i])!r} "
+                    f"(link {i} → {j})"
                 )
             object.__setattr__(self, "loss", tuple(tuple(float(v) for v in row) for row in matrix))
         else:
