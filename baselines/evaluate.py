@@ -36,8 +36,6 @@ side (and each policy's own Fig. 6-style figure beside it).
 
 from __future__ import annotations
 
-import argparse
-import ast
 import json
 import re
 import sys
@@ -50,6 +48,7 @@ import numpy as np
 from baselines.metrics import episode_metrics, summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy, Trajectory, run_episode
+from marine_formation_env.cli import ArgumentParser, parse_overrides
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import SCENARIOS, ScenarioConfig
 
@@ -59,38 +58,6 @@ BUILTIN_POLICIES = ("reference", "random")
 
 #: Default integral-LOS gain σ [m/s] of ``reference:ilos``.
 DEFAULT_ILOS_GAIN = 1.0
-
-
-def parse_overrides(items: Sequence[str], nest: bool = True) -> dict[str, Any]:
-    """Parse ``KEY=VALUE`` strings; VALUE is a Python/JSON literal or a plain string.
-
-    ``PARENT.FIELD=VALUE`` collects into ``{PARENT: {FIELD: VALUE}}``, which
-    :func:`~marine_formation_env.scenarios.make_config` merges into the
-    scenario's setting field by field (``nest=False`` keeps dotted keys as they are).
-    """
-    out: dict[str, Any] = {}
-    for item in items:
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
-        text = raw.strip()
-        lowered = {"true": "True", "false": "False", "null": "None", "none": "None"}.get(text.lower(), text)
-        try:
-            value = ast.literal_eval(lowered)
-        except (ValueError, SyntaxError):
-            value = text
-        parent, dot, child = key.partition(".")
-        if dot and nest:
-            if not parent or not child or "." in child:
-                raise ValueError(f"--set expects KEY=VALUE or PARENT.FIELD=VALUE, got {item!r}")
-            nested = out.setdefault(parent, {})
-            if not isinstance(nested, dict):
-                raise ValueError(f"--set {item!r}: {parent} was already set to {nested!r}")
-            nested[child] = value
-        else:
-            out[key] = value
-    return out
 
 
 def is_reference(spec: str) -> bool:
@@ -267,7 +234,7 @@ def format_table(report: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m baselines.evaluate", description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="python -m baselines.evaluate", description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--scenario", default=None, help=f"scenario ({', '.join(sorted(SCENARIOS))}); default: a model's, else paper"
     )

@@ -31,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
-from baselines.evaluate import is_reference, make_policy, parse_overrides, progress_bar
+from baselines.evaluate import is_reference, make_policy, progress_bar
 from baselines.metrics import episode_metrics
 from baselines.rollout import run_episode
+from marine_formation_env.cli import parse_overrides
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 

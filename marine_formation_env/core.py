@@ -197,9 +197,11 @@ class FormationCore:
         num_envs: number of formations ``B``.
         backend: ``"numpy"`` (the reference implementation), ``"numba"`` (one
             fused compiled kernel per step, :mod:`marine_formation_env._numba`,
-            which compiles the same model and controller functions; results are
-            identical to the numpy path up to floating-point rounding, bit for
-            bit in the tests), or ``"auto"``: numba when it is installed
+            which compiles the same model and controller functions; results
+            agree with the numpy path to floating-point rounding, not bit for
+            bit, since numpy's vectorized transcendental functions and libm's
+            may differ in the last bit on some CPUs: ``tests/test_backends.py``
+            says what it checks), or ``"auto"``: numba when it is installed
             (``pip install 'marine-formation-env[fast]'``), else numpy. The
             environment variable ``MARINE_FORMATION_BACKEND`` overrides ``auto``.
 

@@ -1,8 +1,27 @@
 """The numba backend against the numpy reference implementation, and backend selection.
 
 The numpy path of ``FormationCore`` is the reference; the compiled kernel must
-reproduce it (the kernel evaluates the same expressions in the same order, so
-the tests ask for bit-identical states and observations).
+reproduce it. The kernel evaluates the same expressions in the same order, but
+not with the same transcendental functions: numpy's vectorized ``arctan``,
+``sin`` and ``cos`` (SIMD loops, which differ between CPUs: AVX-512 machines use
+other kernels) and libm's scalar ``atan``/``sin``/``cos`` that numba calls may
+disagree in the last bit. So the two backends are compared with tolerances
+that say what such a last-bit difference can grow to, not bit for bit:
+
+* states: 1e-12 relative to ``max(|value|, 1)`` (metres, m/s, rad). A
+  last-bit difference is ~1e-16 relative; the closed loop is contracting, so
+  over 120 control periods it grew to at most 5e-15 on the machines measured,
+  and 1e-12 leaves a factor 200 of headroom while still catching any real
+  difference of a model or controller term (those are ≥ 1e-8 after one step).
+* observations (float32): within 4 float32 ulps (rounding a float64 that
+  differs in the last bits can land on the neighbouring float32), and the
+  link bits exactly: the structure of what a vessel sees must not differ.
+* rewards and their components: 1e-12 absolute (a step's reward is at most
+  ``dt·Σw`` ≈ 1.4 in magnitude).
+* termination, truncation and the flags: exactly.
+
+Seeded determinism within one backend stays bit-exact (tests/test_env.py,
+tests/test_vector.py, tests/test_channel.py).
 """
 
 from __future__ import annotations
@@ -13,7 +32,7 @@ import pytest
 import marine_formation_env
 from baselines import ReferencePolicy
 from marine_formation_env import RewardConfig, SpeedProfile
-from marine_formation_env.core import FormationCore, resolve_backend
+from marine_formation_env.core import FormationCore, ObservationLayout, resolve_backend
 from marine_formation_env.scenarios import make_config
 
 pytest.importorskip("numba")
@@ -35,9 +54,30 @@ CASES = {
 }
 
 
+STATE_RTOL = 1e-12  # relative to max(|value|, 1); see the module docstring
+REWARD_ATOL = 1e-12
+OBS_ULPS = 4
+
+
+def assert_states_close(fast: np.ndarray, ref: np.ndarray) -> None:
+    scale = np.maximum(np.abs(ref), 1.0)
+    worst = np.max(np.abs(fast - ref) / scale)
+    assert worst <= STATE_RTOL, f"states differ by {worst:.3g} (relative to max(|x|, 1)), more than {STATE_RTOL}"
+
+
+def assert_observations_close(fast: np.ndarray, ref: np.ndarray, n: int) -> None:
+    assert fast.dtype == ref.dtype == np.float32 and fast.shape == ref.shape
+    own = ObservationLayout(n).own
+    links = ref[..., own :: 4]
+    assert np.array_equal(fast[..., own :: 4], links), "link bits differ"
+    assert set(np.unique(links)) <= {0.0, 1.0}
+    ulp = np.spacing(np.maximum(np.abs(ref), np.abs(fast)))
+    assert np.all(np.abs(fast - ref) <= OBS_ULPS * ulp), np.max(np.abs(fast - ref) / ulp)
+
+
 @pytest.mark.parametrize("level", ["force", "guidance", "speed"])
 @pytest.mark.parametrize("case", list(CASES))
-def test_numba_core_is_bit_identical_to_numpy(level: str, case: str) -> None:
+def test_numba_core_matches_numpy(level: str, case: str) -> None:
     overrides = dict(CASES[case])
     if level != "speed":
         overrides.pop("los_integral_gain", None)  # a speed-level option
@@ -53,25 +93,27 @@ def test_numba_core_is_bit_identical_to_numpy(level: str, case: str) -> None:
     for _ in range(120):
         actions = rng.uniform(-1.3, 1.3, (b, cfg.n_vessels, cfg.action_dim))  # out-of-range values are clipped
         a, r = fast.step(actions), ref.step(actions)
-        assert np.array_equal(fast.state, ref.state)
-        assert np.array_equal(a.observation, r.observation)
+        assert_states_close(fast.state, ref.state)
+        assert_observations_close(a.observation, r.observation, cfg.n_vessels)
         for key in r.components:
-            assert np.array_equal(a.components[key], r.components[key]), key
-        np.testing.assert_allclose(a.reward, r.reward, rtol=1e-13, atol=1e-15)
+            np.testing.assert_allclose(a.components[key], r.components[key], rtol=0, atol=REWARD_ATOL, err_msg=key)
+        np.testing.assert_allclose(a.reward, r.reward, rtol=0, atol=REWARD_ATOL)
         for field in ("terminated", "truncated", "collision", "out_of_bounds"):
             assert np.array_equal(getattr(a, field), getattr(r, field)), field
-        if r.commanded_speed is not None:
+        if r.commanded_speed is not None:  # a function of the actions only: no transcendental function
             assert np.array_equal(a.commanded_speed, r.commanded_speed)
         done = np.flatnonzero(r.terminated | r.truncated)
         ended += done.size
         if done.size:
             fresh = np.stack([ref.sample_initial_state(rng) for _ in done])
-            assert np.array_equal(fast.reset(fresh, env_ids=done), ref.reset(fresh, env_ids=done))
+            assert_observations_close(
+                fast.reset(fresh, env_ids=done), ref.reset(fresh, env_ids=done), cfg.n_vessels
+            )
     if case == "random6-episode-ends":
         assert ended > 0  # the episode-end path was exercised
 
 
-def test_reference_paper_episode_is_identical_on_both_backends() -> None:
+def test_reference_paper_episode_agrees_on_both_backends() -> None:
     finals = {}
     for backend in ("numpy", "numba"):
         env = marine_formation_env.parallel_env("paper", backend=backend)
@@ -82,7 +124,7 @@ def test_reference_paper_episode_is_identical_on_both_backends() -> None:
             obs, rewards, *_ = env.step(policy.act(obs))
             total += sum(rewards.values())
         finals[backend] = (env.vessel_states, total)
-    assert np.array_equal(finals["numpy"][0], finals["numba"][0])
+    assert_states_close(finals["numba"][0], finals["numpy"][0])
     assert finals["numpy"][1] == pytest.approx(finals["numba"][1], rel=1e-12)
 
 

@@ -10,8 +10,9 @@ from pettingzoo.test import parallel_api_test
 
 import marine_formation_env
 from baselines.evaluate import main as evaluate_main
-from baselines.evaluate import parse_overrides, reference_options
+from baselines.evaluate import reference_options
 from baselines.sweep import main as sweep_main
+from marine_formation_env.cli import parse_overrides
 from marine_formation_env.scenarios import make_config
 
 
