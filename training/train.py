@@ -25,8 +25,8 @@ from typing import Any
 
 import yaml
 
-from baselines.evaluate import parse_overrides
 from marine_formation_env import ENV_ID
+from marine_formation_env.cli import parse_overrides
 from training.config import TrainConfigError, algo_class, algo_kwargs, apply_overrides, load_config, validate
 
 __all__ = ["build_env", "latest_checkpoint", "main", "train"]
