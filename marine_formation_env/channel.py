@@ -59,7 +59,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from marine_formation_env.errors import ConfigError, build_config, check_number
+from marine_formation_env.errors import ConfigError, build_config, check_number, check_seed, whole_periods
 
 if TYPE_CHECKING:
     from marine_formation_env.scenarios import ScenarioConfig
@@ -76,9 +76,7 @@ def channel_streams(seed: int | None) -> tuple[np.random.Generator, np.random.Ge
     Both are independent of ``np.random.default_rng(seed)`` (the initial-state
     stream of the same seed) and of each other. ``None`` draws fresh entropy.
     """
-    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
-        raise ValueError(f"a channel seed must be an integer ≥ 0 or None, got {seed!r}")
-    root = np.random.SeedSequence(None if seed is None else int(seed), spawn_key=(CHANNEL_STREAM_KEY,))
+    root = np.random.SeedSequence(check_seed(seed, "channel seed"), spawn_key=(CHANNEL_STREAM_KEY,))
     uniform, normal = root.spawn(2)
     return np.random.default_rng(uniform), np.random.default_rng(normal)
 
@@ -257,11 +255,11 @@ class ChannelConfig:
 
     def period_steps(self, dt: float) -> int:
         """Control periods between two transmissions of one vessel without TDMA."""
-        return 1 if self.period is None else _multiple(self.period, dt, "channel.period")
+        return 1 if self.period is None else whole_periods(self.period, dt, "channel.period")
 
     def slot_steps(self, dt: float) -> int:
         """Control periods per TDMA slot (requires ``tdma_slot``)."""
-        return _multiple(self.tdma_slot, dt, "channel.tdma_slot")
+        return whole_periods(self.tdma_slot, dt, "channel.tdma_slot")
 
     def validate(self, dt: float, n: int) -> None:
         """Checks that need the scenario: ``period`` and ``tdma_slot`` are multiples
@@ -271,17 +269,6 @@ class ChannelConfig:
             self.slot_steps(dt)
         if isinstance(self.loss, tuple) and np.shape(self.loss) != (n, n):
             raise ConfigError(f"channel.loss as a matrix must have shape ({n}, {n}), got {np.shape(self.loss)}")
-
-
-def _multiple(value: float, dt: float, name: str) -> int:
-    ratio = value / dt
-    steps = round(ratio)
-    if steps < 1 or abs(ratio - steps) > 1e-6 * max(1.0, ratio):
-        raise ConfigError(
-            f"{name} = {value} s must be a whole number of control periods dt = {dt} s (transmissions happen at "
-            "control instants)"
-        )
-    return int(steps)
 
 
 class LinkChannel:

@@ -63,6 +63,7 @@ from marine_formation_env.dynamics import (
     vessel_rhs,
     wrap_angle,
 )
+from marine_formation_env.errors import float_array
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -385,7 +386,7 @@ class FormationCore:
         """
         ids = slice(None) if env_ids is None else env_ids
         target_shape = self.state[ids].shape
-        arr = np.asarray(initial_state, dtype=float)
+        arr = float_array(initial_state, "initial_state")
         if arr.shape != (self.n, 6) and arr.shape != target_shape:
             raise ValueError(
                 f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}"
@@ -428,7 +429,7 @@ class FormationCore:
             ValueError: wrong shape or a non-finite entry (named by index).
         """
         cfg = self.config
-        actions = np.asarray(actions, dtype=float)
+        actions = float_array(actions, "actions")
         expected = (self.num_envs, self.n, self.action_dim)
         if actions.shape != expected:
             raise ValueError(

@@ -11,13 +11,12 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.errors import check_seed
+from marine_formation_env.frontend import check_initial_state, check_reset_options
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
-
-RESET_OPTIONS = ("initial_state", "channel_seed")
-
 
 class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     """Coordinated path following of underactuated surface vessels under a directed graph.
@@ -254,18 +253,28 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             options: ``{"initial_state": (n, 6) array}`` sets the state exactly
                 (columns x, y, psi, u, v, r); ``{"channel_seed": int}`` seeds
                 the channel stream on its own (to vary the channel's luck with
-                the same initial state); other keys are ignored with a warning.
+                the same initial state). Any other key is ignored with a
+                warning (:mod:`marine_formation_env.frontend`).
+
+        Raises:
+            TypeError: a seed that is not a whole number (numpy integers are
+                fine), options that are not a dict, a non-numeric initial state.
+            ValueError: a negative seed, an initial state of
+                the wrong shape, not finite, or one that would end the episode
+                at its first step (outside the workspace or the envelope, or
+                two vessels closer than ``safety_distance``).
         """
+        seed = check_seed(seed)
+        options = check_reset_options(options)  # every check before anything changes
+        channel_seed = check_seed(options.get("channel_seed"), "channel_seed") if "channel_seed" in options else seed
+        initial = options.get("initial_state")
+        if initial is not None:
+            initial = check_initial_state(self.config, initial)
         if seed is not None:
             self.np_random, self.np_random_seed = seeding.np_random(seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            warnings.warn(f"reset ignores unknown option(s) {unknown}; known: {list(RESET_OPTIONS)}", stacklevel=2)
-        initial = options.get("initial_state")
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
-        self.core.seed_channel([options.get("channel_seed", seed)])
+        self.core.seed_channel([channel_seed])
         obs = self.core.reset(initial)[0]
         self.agents = list(self.possible_agents)
         self._started = True

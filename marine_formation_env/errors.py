@@ -1,9 +1,12 @@
-"""The configuration error shared by the configuration modules.
+"""The configuration error and the input checks shared by every module.
 
 :class:`ConfigError` is re-exported by :mod:`marine_formation_env.scenarios`,
 where most users meet it; it lives here so that the modules the scenario
 configuration is built from (:mod:`~marine_formation_env.channel`,
-:mod:`~marine_formation_env.disturbances`) can raise it too.
+:mod:`~marine_formation_env.disturbances`) can raise it too. The checks of
+values a user passes at run time (seeds, actions, initial states) live here as
+well, so that every front end refuses the same input with the same message.
+Every message names the offending field and value.
 """
 
 from __future__ import annotations
@@ -13,9 +16,11 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from marine_formation_env.params import ParameterError
 
-__all__ = ["ConfigError", "build_config", "check_number"]
+__all__ = ["ConfigError", "build_config", "check_bool", "check_number", "check_seed", "float_array", "whole_periods"]
 
 
 class ConfigError(ValueError):
@@ -31,6 +36,66 @@ def check_number(owner: str, key: str, value: Any, minimum: float | None = 0.0, 
     if not ok:
         bound = "" if minimum is None else (f" > {minimum:g}" if strict else f" ≥ {minimum:g}")
         raise ConfigError(f"{owner}.{key} must be a finite number{bound}, got {value!r}")
+
+
+def check_bool(owner: str, key: str, value: Any) -> None:
+    """Raise ``ConfigError`` unless ``value`` is ``True`` or ``False`` (a truthy string is not)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ConfigError(f"{owner}.{key} must be True or False, got {value!r}")
+
+
+def whole_periods(value: float, dt: float, name: str) -> int:
+    """``value / dt`` as a whole number ≥ 1 of control periods; ``ConfigError`` otherwise.
+
+    Things that happen at control instants (transmissions, TDMA slots, graph
+    switches) can only be timed in whole control periods.
+    """
+    ratio = value / dt
+    steps = round(ratio)
+    if steps < 1 or abs(ratio - steps) > 1e-6 * max(1.0, ratio):
+        raise ConfigError(
+            f"{name} = {value} s must be a whole number of control periods dt = {dt} s (it takes effect at "
+            "control instants)"
+        )
+    return int(steps)
+
+
+def check_seed(seed: Any, name: str = "seed", allow_none: bool = True) -> int | None:
+    """A seed as a Python ``int`` (or None); refuse anything that is not a whole number ≥ 0.
+
+    Python and numpy integers are accepted; floats (``1.5``, and ``2.0``
+    too: a seed is not a measurement), strings and booleans are refused with a
+    ``TypeError`` and negative integers with a ``ValueError``, each naming
+    ``name`` and the value.
+    """
+    expected = "a whole number ≥ 0 or None" if allow_none else "a whole number ≥ 0"
+    if seed is None and allow_none:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{name} must be {expected}, got {seed!r} ({type(seed).__name__})")
+    if seed < 0:
+        raise ValueError(f"{name} must be {expected}, got {seed!r}")
+    return int(seed)
+
+
+def float_array(value: Any, name: str) -> np.ndarray:
+    """``value`` as a float64 array, with a message naming ``name`` and the value if it is not numeric.
+
+    Raises:
+        TypeError: strings, objects or ragged nested sequences (numpy's own
+            message would not say which input was wrong).
+    """
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name} must be numeric, got the string {value!r}")
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name} must be a numeric array, got {_short(value)} ({err})") from None
+
+
+def _short(value: Any, limit: int = 120) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def build_config(cls: type, values: Mapping[str, Any], name: str) -> Any:

@@ -29,6 +29,8 @@ import gymnasium as gym
 import numpy as np
 
 from marine_formation_env.core import FormationCore
+from marine_formation_env.errors import check_seed, float_array
+from marine_formation_env.frontend import check_initial_state, check_reset_options
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 from marine_formation_env.vector import joint_info
@@ -62,14 +64,19 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         """Start an episode (seeding as :meth:`MarineFormationParallelEnv.reset`).
 
         ``options={"initial_state": (n, 6)}`` sets the state exactly,
-        ``options={"channel_seed": int}`` seeds the channel stream on its own.
+        ``options={"channel_seed": int}`` seeds the channel stream on its own;
+        bad input raises as there (:mod:`marine_formation_env.frontend`).
         """
-        super().reset(seed=seed)
-        options = options or {}
+        seed = check_seed(seed)
+        options = check_reset_options(options)  # every check before anything changes
+        channel_seed = check_seed(options.get("channel_seed"), "channel_seed") if "channel_seed" in options else seed
         initial = options.get("initial_state")
+        if initial is not None:
+            initial = check_initial_state(self.config, initial)
+        super().reset(seed=seed)
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
-        self.core.seed_channel([options.get("channel_seed", seed)])
+        self.core.seed_channel([channel_seed])
         obs = self.core.reset(initial)[0].reshape(-1)
         self._done = False
         if self.render_mode == "human":
@@ -80,7 +87,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         """Apply the joint action ``(N·A,)`` for one control period."""
         if self._done:
             raise RuntimeError("the episode has ended (or never started); call reset() before step()")
-        arr = np.asarray(action, dtype=float)
+        arr = float_array(action, "action")
         if arr.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {arr.shape}")
         out = self.core.step(arr.reshape(1, self.config.n_vessels, self.config.action_dim))

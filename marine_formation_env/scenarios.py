@@ -22,7 +22,14 @@ import numpy as np
 
 from marine_formation_env.channel import ChannelConfig, GilbertElliott
 from marine_formation_env.disturbances import Current, SensorNoise
-from marine_formation_env.errors import ConfigError, build_config, check_number
+from marine_formation_env.errors import (
+    ConfigError,
+    build_config,
+    check_bool,
+    check_number,
+    check_seed,
+    whole_periods,
+)
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
 
@@ -37,6 +44,7 @@ __all__ = [
     "ScenarioConfig",
     "SpeedProfile",
     "formation_offsets",
+    "initial_state_problem",
     "make_config",
 ]
 
@@ -173,6 +181,7 @@ class RewardConfig:
     terminal_penalty: bool = True
 
     def __post_init__(self) -> None:
+        check_bool("reward", "terminal_penalty", self.terminal_penalty)
         for f in dataclasses.fields(self):
             if f.name == "terminal_penalty":
                 continue
@@ -289,6 +298,10 @@ class ScenarioConfig:
         for key in ("paper_as_printed", "allow_unreachable"):
             if not isinstance(getattr(self, key), bool):
                 raise ConfigError(f"{key} must be True or False, got {getattr(self, key)!r}")
+        try:
+            set_("topology_seed", check_seed(self.topology_seed, "topology_seed", allow_none=False))
+        except (TypeError, ValueError) as err:
+            raise ConfigError(str(err)) from None
 
         # formation offsets
         if isinstance(self.formation, str):
@@ -377,6 +390,8 @@ class ScenarioConfig:
         if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
             raise ConfigError(f"substeps must be an integer ≥ 1, got {substeps!r}")
         set_("substeps", int(substeps))
+        for k, (dwell, _) in enumerate(schedule):
+            whole_periods(dwell, self.dt, f"topology_schedule[{k}] dwell")
         if not self.horizon >= self.dt:
             raise ConfigError(f"horizon = {self.horizon} s must be at least one control period dt = {self.dt} s")
         for key in ("tau_u_max", "tau_r_max", "psi_max", "max_yaw_rate"):
@@ -444,6 +459,9 @@ class ScenarioConfig:
                 f"current speed + amplitude = {strongest:g} m/s must stay below u_min = {self.u_min:g} m/s: a vessel "
                 "at the slowest allowed speed could not hold its path against it"
             )
+        problem = initial_state_problem(self, nominal, noise.as_array())
+        if problem is not None:
+            raise ConfigError(f"initial_state: {problem}")
 
     def _resolve_graph(self, spec: Any, name: str) -> CommGraph:
         n = self.n_vessels
@@ -523,6 +541,52 @@ class ScenarioConfig:
                 value = list(value)
             out[f.name] = _finite_json(value)
         return out
+
+
+def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.ndarray | None = None) -> str | None:
+    """Why an ``(n, 6)`` initial state would end the episode at its first step, or None.
+
+    A vessel outside the workspace or outside the envelope (|u|, |v| >
+    max_speed, |r| > max_yaw_rate), or two vessels closer than the safety
+    distance, terminate the formation before any policy acts: such a start is
+    an error in the scenario, not an episode. ``noise`` (half-widths of the
+    columns, as :meth:`InitNoise.as_array`) widens each value to the range the
+    reset can draw; the separation check uses the nominal positions (draws
+    that bring two vessels too close are rejected at reset).
+    """
+    state = np.asarray(state, dtype=float)
+    spread = np.zeros(6) if noise is None else np.asarray(noise, dtype=float)
+    x_lo, x_hi, y_lo, y_hi = config.workspace
+    bounds = (
+        ("x", 0, x_lo, x_hi, "m", "the workspace"),
+        ("y", 1, y_lo, y_hi, "m", "the workspace"),
+        ("u", 3, -config.max_speed, config.max_speed, "m/s", "the envelope |u| ≤ max_speed"),
+        ("v", 4, -config.max_speed, config.max_speed, "m/s", "the envelope |v| ≤ max_speed"),
+        ("r", 5, -config.max_yaw_rate, config.max_yaw_rate, "rad/s", "the envelope |r| ≤ max_yaw_rate"),
+    )
+    for name, col, lo, hi, unit, what in bounds:
+        low, high = state[:, col] - spread[col], state[:, col] + spread[col]
+        bad = np.flatnonzero((low < lo) | (high > hi))
+        if bad.size:
+            j = int(bad[0])
+            value = low[j] if low[j] < lo else high[j]
+            drawn = f" (nominal {state[j, col]:g} ± init_noise {spread[col]:g})" if spread[col] else ""
+            return (
+                f"vessel_{j} starts at {name} = {value:g} {unit}{drawn}, outside {what}: "
+                f"{name} ∈ [{lo:g}, {hi:g}] {unit}; the episode would end at its first step"
+            )
+    if config.safety_distance > 0:
+        n = state.shape[0]
+        i, j = np.triu_indices(n, k=1)
+        dist = np.hypot(state[i, 0] - state[j, 0], state[i, 1] - state[j, 1])
+        close = np.flatnonzero(dist < config.safety_distance)
+        if close.size:
+            k = int(close[0])
+            return (
+                f"vessel_{i[k]} and vessel_{j[k]} start {dist[k]:g} m apart, closer than safety_distance = "
+                f"{config.safety_distance:g} m; the episode would end at its first step"
+            )
+    return None
 
 
 def _finite_json(value: Any) -> Any:

@@ -43,6 +43,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.errors import float_array
+from marine_formation_env.frontend import check_initial_state, check_reset_options, formation_seeds
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
@@ -130,31 +132,27 @@ class MarineFormationVectorEnv(VectorEnv):
             options: ``{"initial_state": (N, 6) or (B, N, 6)}`` sets the states
                 exactly; ``{"channel_seed": int or list}`` seeds the channel
                 streams on their own (``+ b`` per formation, like ``seed``).
+                Seeds are whole numbers ≥ 0 (Python or numpy integers); bad
+                values raise and other keys are ignored with a warning, as in
+                the ParallelEnv (:mod:`marine_formation_env.frontend`).
         """
-        seeds = self._per_formation(seed, "seed")
-        self._rngs = [seeding.np_random(int(s))[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
-        options = options or {}
+        b = self.num_formations
+        seeds = formation_seeds(seed, b, "seed")
+        options = check_reset_options(options)  # every check before anything changes
+        channel_seeds = (
+            formation_seeds(options["channel_seed"], b, "channel_seed") if "channel_seed" in options else seeds
+        )
         initial = options.get("initial_state")
+        if initial is not None:
+            initial = check_initial_state(self.config, initial, batch=b)
+        self._rngs = [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
         if initial is None:
             initial = self.core.sample_initial_states(self._rngs)
-        self.core.seed_channel(
-            self._per_formation(options["channel_seed"], "channel_seed") if "channel_seed" in options else seeds
-        )
+        self.core.seed_channel(channel_seeds)
         self.core.reset(initial)
         self._needs_reset[:] = False
         self._started = True
         return self._layout_obs(self.core.observe()), {}
-
-    def _per_formation(self, seed: int | list[int | None] | None, name: str) -> list[int | None]:
-        b = self.num_formations
-        if seed is None:
-            return [None] * b
-        seeds: list[int | None] = (
-            [int(seed) + k for k in range(b)] if isinstance(seed, (int, np.integer)) else list(seed)
-        )
-        if len(seeds) != b:
-            raise ValueError(f"reset({name}=…) needs an int or a list of {b} seeds (one per formation), got {seed!r}")
-        return seeds
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -162,7 +160,7 @@ class MarineFormationVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("step() called before reset()")
         b, n, a = self.num_formations, self.n_vessels, self.config.action_dim
-        arr = np.asarray(actions, dtype=float)
+        arr = float_array(actions, "actions")
         if arr.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape}, got {arr.shape}")
         arr = arr.reshape(b, n, a)

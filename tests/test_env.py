@@ -76,6 +76,10 @@ def random_state(rng: np.random.Generator, n: int) -> np.ndarray:
     return x
 
 
+#: A workspace that holds every :func:`random_state` (the derived one of a 5 s horizon does not).
+WIDE = (-3000.0, 3000.0, -1000.0, 1000.0)
+
+
 def first_obs(env, x0: np.ndarray) -> dict[str, np.ndarray]:
     obs, _ = env.reset(options={"initial_state": x0})
     return obs
@@ -258,10 +262,12 @@ def test_collision_terminates_all_with_terminal_penalty(reward):
         overrides["reward"] = reward
         total_weight = 2.0 + 1.0 + 0.5 + 0.25 + 0.1
     env = marine_formation_env.parallel_env("paper", action_level="speed", **overrides)
+    # head-on, 6 m apart at 5 m/s each: closer than 5 m within the first control period (a start
+    # that is already inside the safety distance is refused at reset)
     x0 = np.array(
         [
-            [0.0, 50.0, 0.0, 3.0, 0.0, 0.0],  # vessel_0 heading +x
-            [3.0, 50.0, math.pi, 3.0, 0.0, 0.0],  # vessel_1, 3 m ahead, heading −x: head-on
+            [0.0, 50.0, math.pi / 2, 5.0, 0.0, 0.0],  # vessel_0 heading +y
+            [0.0, 56.0, -math.pi / 2, 5.0, 0.0, 0.0],  # vessel_1, 6 m to +y, heading −y
             [-100.0, -50.0, 0.0, 5.0, 0.0, 0.0],
         ]
     )
@@ -361,7 +367,9 @@ def test_own_observation_matches_hand_computation():
 def test_slots_hold_relative_coordination_quantities(n):
     # complete graph, so every slot is filled; explicit offsets known by hand
     formation = np.array([[0.0, 0.0], [-100.0, 50.0], [-100.0, -50.0], [-200.0, 100.0]])[:n]
-    env = marine_formation_env.parallel_env("paper", n_vessels=n, formation=formation, topology="complete", horizon=5.0)
+    env = marine_formation_env.parallel_env(
+        "paper", n_vessels=n, formation=formation, topology="complete", horizon=5.0, workspace=WIDE
+    )
     x0 = random_state(np.random.default_rng(n), n)
     obs = first_obs(env, x0)
     for j in range(n):
@@ -420,7 +428,7 @@ def test_paper_graph_masking():
 def test_random_graph_masking(topology_seed):
     n = 5
     env = marine_formation_env.parallel_env(
-        "paper", n_vessels=n, topology="random", topology_seed=topology_seed, horizon=5.0
+        "paper", n_vessels=n, topology="random", topology_seed=topology_seed, horizon=5.0, workspace=WIDE
     )
     adjacency = np.asarray(env.config.graph.adjacency)  # A[j, i] = 1 iff i transmits to j
     x0 = random_state(np.random.default_rng(topology_seed), n)

@@ -186,11 +186,11 @@ def test_joint_view_matches_parallel_env_paper_scenario(level):
 
 
 def test_termination_agrees_with_parallel_env():
-    # two vessels 2 m apart with a 5 m safety distance: the formation terminates on the first step
+    # two vessels 6 m apart, head-on at 5 m/s, with a 5 m safety distance: they collide within the first step
     x0 = np.array(
         [
-            [0.0, 0.0, 0.0, 5.0, 0.0, 0.0],
-            [0.0, 2.0, 0.0, 5.0, 0.0, 0.0],
+            [0.0, 0.0, math.pi / 2, 5.0, 0.0, 0.0],
+            [0.0, 6.0, -math.pi / 2, 5.0, 0.0, 0.0],
             [-300.0, -50.0, 0.0, 5.0, 0.0, 0.0],
         ]
     )

@@ -11,6 +11,7 @@ single-formation env, which implements those semantics independently.
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import gymnasium
@@ -226,7 +227,7 @@ def test_formations_match_parallel_envs_across_autoreset(level, mode, layout):
 @pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_one_formation_ends_while_others_go_on(mode, layout):
-    """Formation 1 starts with two vessels 2 m apart and terminates at once; 0 and 2 do not."""
+    """Formation 1 starts with two vessels 6 m apart, head-on, and collides in the first step; 0 and 2 do not."""
     b_count, seed, level = 3, 5, "speed"
     kw = {"horizon": 2.0, "safety_distance": 5.0, **SCENARIO}
     initial = []
@@ -235,7 +236,8 @@ def test_one_formation_ends_while_others_go_on(mode, layout):
         probe.reset(seed=seed + b)
         initial.append(probe.vessel_states)
     initial = np.stack(initial)
-    initial[1, 1, :2] = initial[1, 0, :2] + np.array([0.0, 2.0])
+    initial[1, 1, :2] = initial[1, 0, :2] + np.array([0.0, 6.0])
+    initial[1, :2, 2:] = [[math.pi / 2, 5.0, 0.0, 0.0], [-math.pi / 2, 5.0, 0.0, 0.0]]
     venv = make_vec(b_count, action_level=level, layout=layout, autoreset_mode=mode, **kw)
     venv.reset(seed=seed, options={"initial_state": initial})
     manual = ManualFormations([seed + b for b in range(b_count)], mode, level, options=initial, **kw)

@@ -1,0 +1,100 @@
+"""What every front end does the same way: reading ``reset`` arguments.
+
+The PettingZoo env, the gymnasium view and the vector env accept the same
+``reset(seed=…, options=…)`` and refuse the same bad input with the same
+message. This module holds those rules once.
+
+Reset options (all optional):
+
+* ``initial_state``: ``(n, 6)`` array, columns ``x, y, psi, u, v, r``; the
+  vector env also takes ``(B, n, 6)``. It must be finite and must not end the
+  episode at its first step (:func:`~marine_formation_env.scenarios.initial_state_problem`).
+* ``channel_seed``: a whole number ≥ 0 that seeds the channel stream on its
+  own (the vector env also takes a list of B of them).
+
+``options`` that is not a mapping raises ``TypeError``. Any other key is
+ignored with a ``UserWarning`` that names it, by every front end alike (an
+option silently ignored is an experiment silently not run, but PettingZoo's
+own ``parallel_api_test`` passes an unknown option and expects it accepted).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from marine_formation_env.errors import check_seed, float_array
+from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem
+
+__all__ = ["RESET_OPTIONS", "check_initial_state", "check_reset_options", "formation_seeds"]
+
+#: The keys ``reset(options=…)`` understands.
+RESET_OPTIONS = ("initial_state", "channel_seed")
+
+
+def check_reset_options(options: Any) -> dict[str, Any]:
+    """``options`` as a dict of the known keys; ``TypeError`` if it is not a mapping.
+
+    Unknown keys are dropped with a ``UserWarning`` that names them.
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise TypeError(f"reset options must be a dict (or None), got {options!r} ({type(options).__name__})")
+    unknown = sorted(map(repr, set(options) - set(RESET_OPTIONS)))
+    if unknown:
+        warnings.warn(
+            f"reset ignores unknown option(s) [{', '.join(unknown)}]; known options: {list(RESET_OPTIONS)}",
+            UserWarning,
+            stacklevel=3,
+        )
+    return {key: options[key] for key in RESET_OPTIONS if key in options}
+
+
+def check_initial_state(config: ScenarioConfig, value: Any, batch: int | None = None) -> np.ndarray:
+    """A float64 initial state ``(n, 6)`` (or ``(batch, n, 6)`` when ``batch`` is given) from ``options``.
+
+    Raises:
+        TypeError: not numeric.
+        ValueError: wrong shape, a non-finite entry, or a state that would
+            end the episode at its first step (names the vessel and the bound).
+    """
+    n = config.n_vessels
+    arr = float_array(value, "initial_state")
+    shapes = [(n, 6)] + ([] if batch is None else [(batch, n, 6)])
+    if arr.shape not in shapes:
+        expected = " or ".join(str(s) for s in shapes)
+        raise ValueError(f"initial_state must have shape {expected} (columns x, y, psi, u, v, r), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
+    for b, state in enumerate(arr.reshape(-1, n, 6)):
+        problem = initial_state_problem(config, state)
+        if problem is not None:
+            where = f"initial_state[{b}]" if arr.ndim == 3 else "initial_state"
+            raise ValueError(f"{where}: {problem}")
+    return arr
+
+
+def formation_seeds(seed: Any, num_formations: int, name: str = "seed") -> list[int | None]:
+    """One seed per formation: ``seed + b`` for a whole number, or a list of ``num_formations`` seeds.
+
+    Python and numpy integers are accepted; floats, strings and booleans are
+    refused (``TypeError``) and so are negative seeds (``ValueError``), with
+    the offending entry named.
+    """
+    if seed is None:
+        return [None] * num_formations
+    if isinstance(seed, (list, tuple, np.ndarray)):
+        seeds = list(seed)
+        if len(seeds) != num_formations:
+            raise ValueError(
+                f"{name} needs a whole number or a list of {num_formations} seeds (one per formation), got {seed!r}"
+            )
+        return [check_seed(s, f"{name}[{b}]") for b, s in enumerate(seeds)]
+    first = check_seed(seed, name)
+    assert first is not None
+    return [first + b for b in range(num_formations)]
