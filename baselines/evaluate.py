@@ -48,7 +48,8 @@ import numpy as np
 from baselines.metrics import episode_metrics, summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy, Trajectory, run_episode
-from marine_formation_env.cli import ArgumentParser, parse_overrides
+from marine_formation_env.atomic import atomic_path, atomic_write_text, check_writable
+from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import SCENARIOS, ScenarioConfig
 
@@ -244,8 +245,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         dest="policies",
         help="policy to run; repeatable: reference[:extrapolate,ilos=σ], random, or a saved model .zip / run folder",
     )
-    parser.add_argument("--episodes", type=int, default=1, help="episodes per policy (default 1)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    parser.add_argument("--episodes", type=int_at_least(1), default=1, help="episodes per policy (default 1)")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--json", type=Path, help="write metrics (per episode and summary) to this JSON file")
     parser.add_argument("--save-trajectory", type=Path, help="write the first episode to this .npz (t, state, …)")
     parser.add_argument("--plot", type=Path, help="write the Fig. 6-style figure of the first episode here")
@@ -256,6 +257,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     policies = args.policies or ["reference"]
     try:
+        for flag, path in (("--json", args.json), ("--save-trajectory", args.save_trajectory), ("--plot", args.plot)):
+            if path is not None:
+                check_writable(path, flag)  # before the evaluation, not after it
         overrides = parse_overrides(args.set)
         report, first, cfg = evaluate(args.scenario, policies, args.episodes, args.seed, overrides, not args.quiet)
     except (ValueError, KeyError, TypeError, FileNotFoundError, ImportError) as err:
@@ -263,15 +267,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.quiet:
         print(format_table(report))
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=2, allow_nan=False, default=_json_default))
+        atomic_write_text(args.json, json.dumps(report, indent=2, allow_nan=False, default=_json_default))
     if args.save_trajectory:
-        args.save_trajectory.parent.mkdir(parents=True, exist_ok=True)
         arrays: dict[str, np.ndarray] = {}
         for k, (label, traj) in enumerate(first.items()):
             arrays.update(traj.to_npz_dict("" if k == 0 else f"{label}__"))
         arrays["formation"] = np.asarray(_config_of(report)["formation"])
-        np.savez_compressed(args.save_trajectory, **arrays)  # type: ignore[arg-type]
+        with atomic_path(args.save_trajectory) as tmp:
+            np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     if args.plot:
         from baselines.plots import plot_comparison, plot_episode
 

@@ -18,11 +18,12 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import Trajectory
+from marine_formation_env.atomic import atomic_path
 from marine_formation_env.dynamics import wrap_angle
 from marine_formation_env.render import require_matplotlib, vessel_color
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["plot_comparison", "plot_episode"]
+__all__ = ["plot_comparison", "plot_episode", "save_figure"]
 
 
 def _snapshot_indices(t: np.ndarray, count: int = 6) -> np.ndarray:
@@ -36,9 +37,15 @@ def _finish(fig: Any, cfg: ScenarioConfig, path: str | Path | None, title: str) 
     fig.suptitle(title or f"scenario {cfg.name!r}, action level {cfg.action_level!r}", fontsize=11)
     fig.tight_layout()
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path)
+        save_figure(fig, path)
     return fig
+
+
+def save_figure(fig: Any, path: str | Path) -> None:
+    """Save ``fig`` to ``path`` (format from the suffix), creating the folder; atomic (whole or not at all)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp)
 
 
 def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None = None, title: str = "") -> Any:

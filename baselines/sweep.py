@@ -33,8 +33,10 @@ import numpy as np
 
 from baselines.evaluate import is_reference, make_policy, progress_bar
 from baselines.metrics import episode_metrics
+from baselines.plots import save_figure
 from baselines.rollout import run_episode
-from marine_formation_env.cli import parse_overrides
+from marine_formation_env.atomic import atomic_write_text, check_writable
+from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 
@@ -204,13 +206,12 @@ def plot_sweep(report: dict[str, Any], path: str | Path) -> Any:
         fontsize=11,
     )
     fig.tight_layout()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
+    save_figure(fig, path)
     return fig
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m baselines.sweep", description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="python -m baselines.sweep", description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenario", default="paper", help=f"base scenario ({', '.join(sorted(SCENARIOS))})")
     parser.add_argument("--loss", type=_floats, default=[0.0, 0.1, 0.3, 0.5, 0.7, 0.9], help="loss probabilities")
     parser.add_argument("--latency", type=_floats, default=[0.0, 0.5, 1.0, 2.0, 4.0, 8.0], help="latencies [s]")
@@ -220,8 +221,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         dest="policies",
         help="reference[:extrapolate,ilos=σ]; repeatable (default: reference and reference:extrapolate)",
     )
-    parser.add_argument("--episodes", type=int, default=3, help="episodes per cell and policy (default 3)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--episodes", type=int_at_least(1), default=3, help="episodes per cell and policy (default 3)"
+    )
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override")
     parser.add_argument("--paper-initial-state", action="store_true", help="start from SPEC §5's initial state")
     parser.add_argument("--out", type=Path, default=Path("results/sweep"), help="output prefix (.json/.md/.png)")
@@ -232,6 +235,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not is_reference(label):
             parser.error(f"the sweep runs the reference policy (with options), got {label!r}")
     try:
+        for suffix in (".json", ".md", ".png"):
+            check_writable(args.out.with_suffix(suffix), "--out")
         report = sweep(
             args.scenario,
             args.loss,
@@ -245,10 +250,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     except (ValueError, KeyError, TypeError) as err:
         parser.error(str(err))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     table = format_markdown(report)
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=2, allow_nan=False))
-    args.out.with_suffix(".md").write_text(table)
+    atomic_write_text(args.out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))
+    atomic_write_text(args.out.with_suffix(".md"), table)
     try:
         plot_sweep(report, args.out.with_suffix(".png"))
     except ImportError as err:

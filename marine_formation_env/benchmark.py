@@ -42,6 +42,9 @@ from typing import Any
 
 import numpy as np
 
+from marine_formation_env.atomic import atomic_write_text, check_writable
+from marine_formation_env.cli import ArgumentParser
+
 __all__ = ["count_vessel_step_ops", "main", "run_case"]
 
 BATCH_SIZES = (1, 64, 1024, 8192)
@@ -347,7 +350,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="python -m marine_formation_env.benchmark", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument("--worker", nargs=4, metavar=("CASE", "B", "SECONDS", "REPEATS"), help=argparse.SUPPRESS)
@@ -365,8 +368,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.batch_sizes, args.seconds, args.repeats = [1, 64], 0.5, 3
     report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
     print(format_report(report))
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(report, indent=2))
+    atomic_write_text(check_writable(args.json, "--json"), json.dumps(report, indent=2))
     print(f"\nwritten {args.json}")
     return 0
 

@@ -246,6 +246,6 @@ class Gains:
             value = getattr(self, key)
             number = float(value) if isinstance(value, Real) and not isinstance(value, bool) else math.nan
             if not (math.isfinite(number) and number > 0.0):
-                name = "Δ (delta)" if key == "delta" else key
+                name = "Δ (gains.delta)" if key == "delta" else f"gains.{key}"
                 raise ParameterError(f"gain {name} must be a finite number > 0, got {value!r}")
             object.__setattr__(self, key, number)

@@ -43,6 +43,7 @@ __all__ = [
     "RewardConfig",
     "ScenarioConfig",
     "SpeedProfile",
+    "config_from_dict",
     "formation_offsets",
     "initial_state_problem",
     "make_config",
@@ -293,7 +294,9 @@ class ScenarioConfig:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
             raise ConfigError(f"n_vessels must be an integer ≥ 2, got {n!r}")
         set_("n_vessels", int(n))
-        if self.action_level not in ACTION_LEVELS:
+        if not isinstance(self.name, str):
+            raise ConfigError(f"name must be a string, got {self.name!r}")
+        if not isinstance(self.action_level, str) or self.action_level not in ACTION_LEVELS:
             raise ConfigError(f"unknown action_level {self.action_level!r}; choose one of {list(ACTION_LEVELS)}")
         for key in ("paper_as_printed", "allow_unreachable"):
             if not isinstance(getattr(self, key), bool):
@@ -330,7 +333,7 @@ class ScenarioConfig:
             try:
                 graph.require_globally_reachable()
             except GraphError as err:
-                raise ConfigError(str(err)) from None
+                raise ConfigError(f"{'topology_schedule' if schedule else 'topology'}: {err}") from None
         set_("topology", graph)
 
         # vessel, gains, speeds: the paper's assumptions
@@ -374,7 +377,8 @@ class ScenarioConfig:
         if lo < self.u_min + a - 1e-12 or hi > self.u_max - a + 1e-12:
             raise ConfigError(
                 f"u_d(t) ranges over [{lo:g}, {hi:g}] m/s but assumption (19) needs it inside "
-                f"[U_min + a, U_max − a] = [{self.u_min + a:g}, {self.u_max - a:g}] m/s"
+                f"[U_min + a, U_max − a] = [{self.u_min + a:g}, {self.u_max - a:g}] m/s "
+                f"(u_min = {self.u_min:g}, u_max = {self.u_max:g}, gains.a = {a:g})"
             )
         try:
             vessel.validate_speed_band(self.u_min, self.u_max, self.gains.delta)
@@ -576,24 +580,68 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
                 f"{name} ∈ [{lo:g}, {hi:g}] {unit}; the episode would end at its first step"
             )
     if config.safety_distance > 0:
-        n = state.shape[0]
-        i, j = np.triu_indices(n, k=1)
-        dist = np.hypot(state[i, 0] - state[j, 0], state[i, 1] - state[j, 1])
+        first, second = np.triu_indices(state.shape[0], k=1)
+        dist = np.hypot(state[first, 0] - state[second, 0], state[first, 1] - state[second, 1])
         close = np.flatnonzero(dist < config.safety_distance)
         if close.size:
             k = int(close[0])
             return (
-                f"vessel_{i[k]} and vessel_{j[k]} start {dist[k]:g} m apart, closer than safety_distance = "
+                f"vessel_{first[k]} and vessel_{second[k]} start {dist[k]:g} m apart, closer than safety_distance = "
                 f"{config.safety_distance:g} m; the episode would end at its first step"
             )
     return None
 
 
+def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
+    """Rebuild a :class:`ScenarioConfig` from :meth:`ScenarioConfig.to_dict` (e.g. a JSON report's ``config``).
+
+    ``config_from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()`` for every
+    valid configuration (tests/test_input_errors.py checks it on random input).
+
+    Raises:
+        ConfigError: ``data`` is not such a description, or the values are invalid.
+    """
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"a scenario description must be a mapping, got {data!r}")
+    values = _from_json(dict(data))
+    unknown = sorted(set(values) - {f.name for f in dataclasses.fields(ScenarioConfig)})
+    if unknown:
+        raise ConfigError(f"unknown scenario key(s) {unknown} in the description")
+    n = values.get("n_vessels", 3)
+    try:
+        schedule = values.get("topology_schedule") or []
+        if schedule:
+            values["topology"] = None  # the union of the scheduled graphs is derived again
+            values["topology_schedule"] = [
+                (entry["dwell"], CommGraph.from_links(n, entry["links"], entry["name"])) for entry in schedule
+            ]
+        topology = values.get("topology")
+        if isinstance(topology, Mapping):
+            values["topology"] = CommGraph.from_links(n, topology["links"], topology["name"])
+        vessel = values.get("vessel")
+        if isinstance(vessel, Mapping):
+            values["vessel"] = VesselParams(**vessel)
+    except (KeyError, TypeError, GraphError, ParameterError) as err:
+        raise ConfigError(f"not a scenario description written by ScenarioConfig.to_dict: {err!r}") from None
+    return ScenarioConfig(**values)
+
+
+def _from_json(value: Any) -> Any:
+    """Inverse of :func:`_finite_json`: ``"inf"``/``"-inf"`` back to floats (names stay strings)."""
+    if isinstance(value, dict):
+        return {k: v if k == "name" else _from_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_from_json(v) for v in value]
+    if value == "inf" or value == "-inf":
+        return float(value)
+    return value
+
+
 def _finite_json(value: Any) -> Any:
-    """``value`` with every infinite float replaced by ``"inf"``/``"-inf"`` (strict JSON has no infinity)."""
+    """``value`` with tuples as lists and every infinite float as ``"inf"``/``"-inf"`` (strict JSON has no infinity)."""
     if isinstance(value, dict):
         return {k: _finite_json(v) for k, v in value.items()}
-    if isinstance(value, list):
+    if isinstance(value, (list, tuple)):
         return [_finite_json(v) for v in value]
     if isinstance(value, float) and math.isinf(value):
         return "inf" if value > 0 else "-inf"

@@ -11,6 +11,7 @@ acts from its own masked observation with the shared network.
 from __future__ import annotations
 
 import pickle
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from training.config import algo_class
 
-__all__ = ["ModelPolicy", "load_learned_policy", "run_folder_of"]
+__all__ = ["UNREADABLE", "ModelPolicy", "UnreadableRunError", "load_learned_policy", "run_folder_of"]
 
 
 class ModelPolicy(BatchPolicy):
@@ -74,15 +75,48 @@ def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[M
         config_path = folder.parent / "config.yaml"  # a checkpoint in runs/NAME/checkpoints/
     if not config_path.is_file():
         raise FileNotFoundError(f"no config.yaml beside {str(model_path)!r}: was it written by training.train?")
-    config = yaml.safe_load(config_path.read_text())[ENV_ID]
-    model = algo_class(config["algo"]).load(model_path, device="cpu")
+    try:
+        config = yaml.safe_load(config_path.read_text())[ENV_ID]
+        algo = config["algo"]
+    except (yaml.YAMLError, KeyError, TypeError) as err:
+        raise UnreadableRunError(f"{config_path} is not a training config ({type(err).__name__}: {err})") from None
+    try:
+        model = algo_class(algo).load(model_path, device="cpu")
+    except UNREADABLE as err:
+        raise UnreadableRunError(f"cannot load the model {str(model_path)!r}: {_reason(err)}") from None
     normalizer = None
     stats = _vecnormalize_path(model_path)
     if stats is not None:
-        with open(stats, "rb") as handle:
-            normalizer = pickle.load(handle)
-        normalizer.training = False
+        try:
+            with open(stats, "rb") as handle:
+                normalizer = pickle.load(handle)
+            normalizer.training = False
+        except UNREADABLE as err:
+            raise UnreadableRunError(f"cannot load the normalization {str(stats)!r}: {_reason(err)}") from None
     return ModelPolicy(model, normalizer, deterministic), config
+
+
+#: What reading a truncated, empty or foreign model or pickle file raises.
+UNREADABLE = (
+    zipfile.BadZipFile,
+    AssertionError,  # SB3: "No data found in the saved file"
+    EOFError,
+    pickle.UnpicklingError,
+    ValueError,
+    KeyError,
+    AttributeError,
+    RuntimeError,
+    OSError,
+)
+
+
+class UnreadableRunError(ValueError):
+    """A model, normalization or config file of a run folder that cannot be read (names the file)."""
+
+
+def _reason(err: BaseException) -> str:
+    text = str(err) or "empty or truncated file"
+    return f"{type(err).__name__}: {text}"
 
 
 def _vecnormalize_path(model_path: Path) -> Path | None:
