@@ -223,10 +223,8 @@ def format_table(report: dict[str, Any]) -> str:
                 row.append(fmt.format(stats["mean"]))
             elif stats["count"] < len(result["episodes"]):
                 row.append(f"{fmt.format(stats['mean'])} ± {fmt.format(stats['std'])} ({stats['count']} ep.)")
-            elif stats["count"] > 1:
-                row.append(f"{fmt.format(stats['mean'])} ± {fmt.format(stats['std'])}")
             else:
-                row.append(fmt.format(stats["mean"]))
+                row.append(f"{fmt.format(stats['mean'])} ± {fmt.format(stats['std'])}")
         rows.append(row)
     widths = [max(len(r[c]) for r in rows) for c in range(len(header))]
     lines = ["  ".join(cell.ljust(w) for cell, w in zip(r, widths, strict=True)) for r in rows]

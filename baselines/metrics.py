@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import Trajectory
-from marine_formation_env.dynamics import wrap_angle
+from marine_formation_env.dynamics import PSI, U, V, X, Y, wrap_angle
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["SETTLING_BANDS", "SUCCESS_BANDS", "episode_metrics", "settling_time", "summarize"]
@@ -42,22 +42,22 @@ SUCCESS_BANDS = {"cross_track": 1.0, "heading_deg": 2.0, "spread": 1.0, "speed":
 
 def _heading(traj: Trajectory, cfg: ScenarioConfig) -> np.ndarray:
     """ψ (still water) or the course over ground χ (with a current), ``(T+1, n)`` [rad]."""
-    psi = traj.state[..., 2]
+    psi = traj.state[..., PSI]
     if cfg.current.is_zero:
         return wrap_angle(psi)  # type: ignore[no-any-return]
-    u, v = traj.state[..., 3], traj.state[..., 4]
+    u, v = traj.state[..., U], traj.state[..., V]
     vc_x, vc_y = cfg.current.velocity(traj.t[:, None])
     return np.arctan2(u * np.sin(psi) + v * np.cos(psi) + vc_y, u * np.cos(psi) - v * np.sin(psi) + vc_x)
 
 
 def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
     s = traj.state
-    theta = s[..., 0] - cfg.formation[:, 0]
+    theta = s[..., X] - cfg.formation[:, 0]
     return {
-        "cross_track": s[..., 1] - cfg.formation[:, 1],
+        "cross_track": s[..., Y] - cfg.formation[:, 1],
         "heading_deg": np.degrees(_heading(traj, cfg)),
         "spread": np.ptp(theta, axis=1),
-        "speed": s[..., 3] - traj.u_d[:, None],
+        "speed": s[..., U] - traj.u_d[:, None],
     }
 
 
@@ -79,7 +79,7 @@ def _surge_outside_time(traj: Trajectory, cfg: ScenarioConfig) -> float:
 
     Each recorded instant but the last stands for the control period that follows it.
     """
-    u = traj.state[:-1, :, 3]
+    u = traj.state[:-1, :, U]
     outside = ~np.all((u > cfg.u_min) & (u < cfg.u_max), axis=1)
     return float(np.sum(np.diff(traj.t)[outside]))
 
@@ -96,7 +96,7 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
     outside = ~np.all((u_c > cfg.u_min) & (u_c < cfg.u_max), axis=1) & known
     returns = traj.rewards.sum(axis=0)
     i, j = np.triu_indices(cfg.n_vessels, k=1)
-    separation = np.hypot(traj.state[:, i, 0] - traj.state[:, j, 0], traj.state[:, i, 1] - traj.state[:, j, 1])
+    separation = np.hypot(traj.state[:, i, X] - traj.state[:, j, X], traj.state[:, i, Y] - traj.state[:, j, Y])
     settle = settling_time(traj, cfg)
     success = not traj.terminated and all(
         float(np.max(np.abs(err[key][-1]))) <= tol for key, tol in SUCCESS_BANDS.items()

@@ -16,7 +16,7 @@ import numpy as np
 
 from marine_formation_env.env import MarineFormationParallelEnv
 
-__all__ = ["Policy", "RandomPolicy", "Trajectory", "run_episode"]
+__all__ = ["BatchPolicy", "Policy", "RandomPolicy", "Trajectory", "run_episode"]
 
 
 class Policy(Protocol):

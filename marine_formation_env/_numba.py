@@ -80,7 +80,7 @@ def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0,
         return vessel_derivatives(p, psi, u, v, r, cmd0, cmd1, None, vc_x, vc_y)
     acc = accelerations(p, u, v, r)
     if level == 1:
-        tau_u, tau_r = heading_tracking_inputs(p, g, psi, u, v, r, u_c0 + u_c_dot * t, cmd1, printed, acc, u_c_dot)
+        tau_u, tau_r = heading_tracking_inputs(p, g, cmd1, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
     else:
         tau_u, tau_r = path_following_inputs(p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
     tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)

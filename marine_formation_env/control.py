@@ -234,17 +234,20 @@ def path_following_inputs(
 def heading_tracking_inputs(
     p: VesselParams,
     gains: Gains,
+    psi_d: np.ndarray,
     psi: np.ndarray,
     u: np.ndarray,
     v: np.ndarray,
     r: np.ndarray,
     u_c: np.ndarray,
-    psi_d: np.ndarray,
+    u_c_dot: np.ndarray | float,
     as_printed: bool = False,
     acc: Accelerations | None = None,
-    u_c_dot: np.ndarray | float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Surge (11) and yaw (13) loops tracking ``u_c`` (with rate ``u̇_c``) and a held heading ``ψ_d``.
+
+    The arguments are in the order of :func:`path_following_inputs`, with the
+    heading command ``ψ_d`` where that has the cross-track error ``e``.
 
     Returns:
         ``(τ_u, τ_r)`` [m/s², rad/s²].

@@ -558,7 +558,7 @@ class FormationCore:
                 psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
                 acc = accelerations(p, u, v, r)
                 tau_u, tau_r = heading_tracking_inputs(
-                    p, gains, psi, u, v, r, u_c0 + u_c_dot * t, psi_d, printed, acc, u_c_dot
+                    p, gains, psi_d, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
                 )
                 return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc, sea(t))
 

@@ -1,4 +1,4 @@
-"""Rendering with matplotlib (imported lazily; ``pip install marine-formation-env[render]``).
+"""Rendering with matplotlib (imported lazily; ``pip install marine-formation-env[plot]``).
 
 A fixed world camera shows the scenario's workspace box with:
 
@@ -37,7 +37,7 @@ def require_matplotlib() -> Any:
     try:
         import matplotlib
     except ImportError as err:  # pragma: no cover - depends on the environment
-        raise ImportError("rendering and plotting need matplotlib: pip install 'marine-formation-env[render]'") from err
+        raise ImportError("rendering and plotting need matplotlib: pip install 'marine-formation-env[plot]'") from err
     return matplotlib
 
 

@@ -254,4 +254,7 @@ class MarineFormationVectorEnv(VectorEnv):
         return (self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0)),)
 
     def close_extras(self, **kwargs: Any) -> None:
-        self._renderer = None
+        """Close the renderer's figure (if one was opened)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -350,7 +350,7 @@ def test_heading_tracking_closed_loop_is_linear_second_order() -> None:
     psi_d = -0.4
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
-        tau_u, tau_r = heading_tracking_inputs(p, g, s[2], s[3], s[4], s[5], 5.0, psi_d)
+        tau_u, tau_r = heading_tracking_inputs(p, g, psi_d, s[2], s[3], s[4], s[5], 5.0, 0.0)
         return model_rhs(p, s, float(tau_u), float(tau_r))
 
     s0 = np.array([0.0, 0.0, 0.5, 4.0, 0.1, 0.02])
