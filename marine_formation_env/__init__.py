@@ -32,7 +32,7 @@ from marine_formation_env.scenarios import (
     make_config,
 )
 
-__version__ = "0.2.0"
+__version__ = "0.3.0.dev0"
 
 ENV_ID = "MarineFormation-v0"
 

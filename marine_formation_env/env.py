@@ -146,7 +146,15 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ``init_noise`` (x, y [m], ψ [rad], u [m/s]); ``paper``: exactly SPEC §5,
     ``(x, y, ψ, u, v, r)`` = (−50, 20, 0, 3, 0, 0), (−60, 30, 0.3, 3, 0, 0),
     (−120, −10, −0.2, 3, 0, 0). ``reset(options={"initial_state": (n, 6)})``
-    sets it exactly.
+    sets it exactly. A start that would end the episode before the first
+    decision (a vessel outside the workspace or the speed/yaw-rate envelope,
+    or two vessels closer than ``safety_distance``) is refused, at
+    construction for the scenario's own initial state (with its noise) and at
+    ``reset`` for one passed in, with the vessel and the bound named.
+
+    Seeds are whole numbers ≥ 0 (Python or numpy integers); floats, strings
+    and negative numbers raise. Unknown ``reset`` options are ignored with a
+    warning, the same in every front end.
 
     ## Episode End
 
@@ -199,6 +207,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     * v0: initial release; channel, switching graphs, currents and sensor
       noise added as options whose defaults leave the behaviour unchanged.
+      Since 0.3.0, input that used to be accepted silently is refused
+      (initial states that end the episode at once, float seeds, schedule
+      dwells that are not whole control periods); valid input behaves as before.
     """
 
     metadata: ClassVar[dict[str, Any]] = {
