@@ -73,6 +73,7 @@ __all__ = [
     "FormationCore",
     "ObservationLayout",
     "StepOutput",
+    "reset_output",
 ]
 
 OWN_FEATURES = ("cross_track_error", "heading", "surge", "sway", "yaw_rate", "desired_speed", "desired_speed_rate")
@@ -130,6 +131,30 @@ class StepOutput:
     commanded_speed: np.ndarray | None
     collision: np.ndarray
     out_of_bounds: np.ndarray
+
+
+def reset_output(observation: np.ndarray, has_commanded_speed: bool) -> StepOutput:
+    """The :class:`StepOutput` of a reset: its observation, and zeros where nothing has happened yet.
+
+    Front ends build ``reset()``'s infos from it with the same code as
+    ``step()``'s, so both have the same keys (TorchRL and other wrappers build
+    their info specs from ``reset()``): zero rewards and reward components, no
+    collision, not out of bounds, not done, and a commanded speed of 0 m/s
+    (no command yet) at the levels that have one.
+    """
+    b, n = observation.shape[:2]
+    zeros = np.zeros((b, n))
+    flags = np.zeros(b, dtype=bool)
+    return StepOutput(
+        observation=observation,
+        reward=zeros.copy(),
+        terminated=flags.copy(),
+        truncated=flags.copy(),
+        components={key: zeros.copy() for key in REWARD_COMPONENTS},
+        commanded_speed=zeros.copy() if has_commanded_speed else None,
+        collision=flags.copy(),
+        out_of_bounds=flags.copy(),
+    )
 
 
 def physical_commands(config: ScenarioConfig, actions: np.ndarray) -> dict[str, np.ndarray]:

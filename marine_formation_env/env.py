@@ -10,7 +10,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import check_seed
 from marine_formation_env.frontend import check_initial_state, check_reset_options
 from marine_formation_env.render import check_render_mode
@@ -291,7 +291,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self._started = True
         if self.render_mode == "human":
             self.render()
-        return self._per_agent(obs), {agent: {} for agent in self.agents}
+        idle = reset_output(obs[None], self.config.action_level != "force")
+        return self._per_agent(obs), {agent: self._info(idle, self._index[agent]) for agent in self.agents}
 
     def step(
         self, actions: dict[str, Any]

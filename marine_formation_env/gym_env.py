@@ -28,7 +28,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from marine_formation_env.core import FormationCore
+from marine_formation_env.core import FormationCore, reset_output
 from marine_formation_env.errors import check_seed, float_array
 from marine_formation_env.frontend import check_initial_state, check_reset_options
 from marine_formation_env.render import check_render_mode
@@ -77,11 +77,11 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
         self.core.seed_channel([channel_seed])
-        obs = self.core.reset(initial)[0].reshape(-1)
+        obs = self.core.reset(initial)
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return obs, {}
+        return obs[0].reshape(-1), joint_info(reset_output(obs, self.config.action_level != "force"), 0)
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the joint action ``(N·A,)`` for one control period."""

@@ -42,7 +42,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from marine_formation_env.core import FormationCore, StepOutput
+from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import check_initial_state, check_reset_options, formation_seeds
 from marine_formation_env.render import check_render_mode
@@ -152,7 +152,8 @@ class MarineFormationVectorEnv(VectorEnv):
         self.core.reset(initial)
         self._needs_reset[:] = False
         self._started = True
-        return self._layout_obs(self.core.observe()), {}
+        obs = self.core.observe()
+        return self._layout_obs(obs), self._infos(reset_output(obs, self.config.action_level != "force"))
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
