@@ -11,8 +11,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
-from marine_formation_env.errors import check_seed
-from marine_formation_env.frontend import check_initial_state, check_reset_options
+from marine_formation_env.frontend import read_reset
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
@@ -275,17 +274,13 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
                 at its first step (outside the workspace or the envelope, or
                 two vessels closer than ``safety_distance``).
         """
-        seed = check_seed(seed)
-        options = check_reset_options(options)  # every check before anything changes
-        channel_seed = check_seed(options.get("channel_seed"), "channel_seed") if "channel_seed" in options else seed
-        initial = options.get("initial_state")
-        if initial is not None:
-            initial = check_initial_state(self.config, initial)
-        if seed is not None:
-            self.np_random, self.np_random_seed = seeding.np_random(seed)
+        request = read_reset(self.config, seed, options)  # every check before anything changes
+        if request.seeds[0] is not None:
+            self.np_random, self.np_random_seed = seeding.np_random(request.seeds[0])
+        initial = request.initial_state
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
-        self.core.seed_channel([channel_seed])
+        self.core.seed_channel(request.channel_seeds)
         obs = self.core.reset(initial)[0]
         self.agents = list(self.possible_agents)
         self._started = True

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,7 +30,14 @@ import numpy as np
 from marine_formation_env.errors import check_seed, float_array
 from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem
 
-__all__ = ["RESET_OPTIONS", "check_initial_state", "check_reset_options", "formation_seeds"]
+__all__ = [
+    "RESET_OPTIONS",
+    "ResetRequest",
+    "check_initial_state",
+    "check_reset_options",
+    "formation_seeds",
+    "read_reset",
+]
 
 #: The keys ``reset(options=…)`` understands.
 RESET_OPTIONS = ("initial_state", "channel_seed")
@@ -98,3 +106,48 @@ def formation_seeds(seed: Any, num_formations: int, name: str = "seed") -> list[
     first = check_seed(seed, name)
     assert first is not None
     return [first + b for b in range(num_formations)]
+
+
+@dataclass(frozen=True)
+class ResetRequest:
+    """The checked arguments of one ``reset(seed=…, options=…)`` call.
+
+    Attributes:
+        seeds: one per formation (None: keep that formation's generator).
+        channel_seeds: one per formation, for the channel streams (the reset
+            seeds unless ``options["channel_seed"]`` is given).
+        initial_state: the state to set exactly, ``(n, 6)`` or ``(B, n, 6)``,
+            or None to draw it from the scenario's initial-state noise.
+    """
+
+    seeds: list[int | None]
+    channel_seeds: list[int | None]
+    initial_state: np.ndarray | None
+
+
+def read_reset(
+    config: ScenarioConfig, seed: Any, options: Any, num_formations: int | None = None
+) -> ResetRequest:
+    """Check every ``reset`` argument before anything changes, the same way for every front end.
+
+    Args:
+        seed, options: as passed to ``reset``.
+        num_formations: None for a single-formation front end (one seed, an
+            ``(n, 6)`` state); B for the vector env (``seed + b`` or a list of
+            B seeds, an ``(n, 6)`` or ``(B, n, 6)`` state).
+    """
+    options = check_reset_options(options)
+    if num_formations is None:
+        seeds = [check_seed(seed)]
+        channel = [check_seed(options["channel_seed"], "channel_seed")] if "channel_seed" in options else seeds
+    else:
+        seeds = formation_seeds(seed, num_formations, "seed")
+        channel = (
+            formation_seeds(options["channel_seed"], num_formations, "channel_seed")
+            if "channel_seed" in options
+            else seeds
+        )
+    initial = options.get("initial_state")
+    if initial is not None:
+        initial = check_initial_state(config, initial, num_formations)
+    return ResetRequest(seeds, channel, initial)

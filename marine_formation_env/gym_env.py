@@ -29,8 +29,8 @@ import gymnasium as gym
 import numpy as np
 
 from marine_formation_env.core import FormationCore, reset_output
-from marine_formation_env.errors import check_seed, float_array
-from marine_formation_env.frontend import check_initial_state, check_reset_options
+from marine_formation_env.errors import float_array
+from marine_formation_env.frontend import read_reset
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 from marine_formation_env.vector import joint_info
@@ -67,16 +67,12 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         ``options={"channel_seed": int}`` seeds the channel stream on its own;
         bad input raises as there (:mod:`marine_formation_env.frontend`).
         """
-        seed = check_seed(seed)
-        options = check_reset_options(options)  # every check before anything changes
-        channel_seed = check_seed(options.get("channel_seed"), "channel_seed") if "channel_seed" in options else seed
-        initial = options.get("initial_state")
-        if initial is not None:
-            initial = check_initial_state(self.config, initial)
-        super().reset(seed=seed)
+        request = read_reset(self.config, seed, options)  # every check before anything changes
+        super().reset(seed=request.seeds[0])
+        initial = request.initial_state
         if initial is None:
             initial = self.core.sample_initial_state(self.np_random)
-        self.core.seed_channel([channel_seed])
+        self.core.seed_channel(request.channel_seeds)
         obs = self.core.reset(initial)
         self._done = False
         if self.render_mode == "human":

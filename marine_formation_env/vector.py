@@ -44,7 +44,7 @@ from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import check_initial_state, check_reset_options, formation_seeds
+from marine_formation_env.frontend import read_reset
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, make_config
 
@@ -136,19 +136,14 @@ class MarineFormationVectorEnv(VectorEnv):
                 values raise and other keys are ignored with a warning, as in
                 the ParallelEnv (:mod:`marine_formation_env.frontend`).
         """
-        b = self.num_formations
-        seeds = formation_seeds(seed, b, "seed")
-        options = check_reset_options(options)  # every check before anything changes
-        channel_seeds = (
-            formation_seeds(options["channel_seed"], b, "channel_seed") if "channel_seed" in options else seeds
-        )
-        initial = options.get("initial_state")
-        if initial is not None:
-            initial = check_initial_state(self.config, initial, batch=b)
-        self._rngs = [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(seeds)]
+        request = read_reset(self.config, seed, options, self.num_formations)  # every check before anything changes
+        self._rngs = [
+            seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(request.seeds)
+        ]
+        initial = request.initial_state
         if initial is None:
             initial = self.core.sample_initial_states(self._rngs)
-        self.core.seed_channel(channel_seeds)
+        self.core.seed_channel(request.channel_seeds)
         self.core.reset(initial)
         self._needs_reset[:] = False
         self._started = True
