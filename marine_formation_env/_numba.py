@@ -13,6 +13,8 @@ the reference implementation; the tests check that both agree.
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import types
 from collections import namedtuple
 from typing import Any
@@ -21,7 +23,8 @@ import numpy as np
 from numba import njit, prange
 from numba.extending import register_jitable
 
-from marine_formation_env import control, dynamics
+from marine_formation_env import control, dynamics, rules
+from marine_formation_env.rules import AGE, COORDINATION, LINK, OWN_SIZE, SLOT_SIZE, VELOCITY
 
 __all__ = ["LEVEL_CODES", "coefficients", "step_kernel"]
 
@@ -43,6 +46,15 @@ for _fn in (
     control.heading_yaw_reference,
     control.path_following_inputs,
     control.heading_tracking_inputs,
+    rules.rk4_combine,
+    rules.along_track,
+    rules.slot_differences,
+    rules.bounded_cost,
+    rules.cost_term,
+    rules.effort_term,
+    rules.terminal_term,
+    rules.outside_workspace,
+    rules.outside_envelope,
 ):
     register_jitable(_fn)
 
@@ -52,6 +64,14 @@ vessel_derivatives = dynamics.vessel_derivatives
 wrap_angle = dynamics.wrap_angle
 path_following_inputs = control.path_following_inputs
 heading_tracking_inputs = control.heading_tracking_inputs
+rk4_combine = rules.rk4_combine
+along_track = rules.along_track
+slot_differences = rules.slot_differences
+cost_term = rules.cost_term
+effort_term = rules.effort_term
+terminal_term = rules.terminal_term
+outside_workspace = rules.outside_workspace
+outside_envelope = rules.outside_envelope
 
 
 def coefficients(config: Any) -> tuple[Any, Any]:
@@ -178,32 +198,30 @@ def _kernel(  # type: ignore[no-untyped-def]
                 k2 = _stage(fixed, y, psi, u, v, r, k1, hh, t + hh)
                 k3 = _stage(fixed, y, psi, u, v, r, k2, hh, t + hh)
                 k4 = _stage(fixed, y, psi, u, v, r, k3, h, t + h)
-                w = h / 6.0
-                x = x + w * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0])
-                y = y + w * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1])
-                psi = psi + w * (k1[2] + 2.0 * (k2[2] + k3[2]) + k4[2])
-                u = u + w * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3])
-                v = v + w * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4])
-                r = r + w * (k1[5] + 2.0 * (k2[5] + k3[5]) + k4[5])
+                x = rk4_combine(x, k1[0], k2[0], k3[0], k4[0], h)
+                y = rk4_combine(y, k1[1], k2[1], k3[1], k4[1], h)
+                psi = rk4_combine(psi, k1[2], k2[2], k3[2], k4[2], h)
+                u = rk4_combine(u, k1[3], k2[3], k3[3], k4[3], h)
+                v = rk4_combine(v, k1[4], k2[4], k3[4], k4[4], h)
+                r = rk4_combine(r, k1[5], k2[5], k3[5], k4[5], h)
             state[b, j, 0], state[b, j, 1], state[b, j, 2] = x, y, psi
             state[b, j, 3], state[b, j, 4], state[b, j, 5] = u, v, r
 
         # ---- formation quantities
         theta_mean = 0.0
         for j in range(n):
-            theta[b, j] = state[b, j, 0] - offsets[j, 0]
-            xdot[b, j] = state[b, j, 3] * np.cos(state[b, j, 2]) - state[b, j, 4] * np.sin(state[b, j, 2])
+            theta[b, j], xdot[b, j] = along_track(
+                state[b, j, 0], offsets[j, 0], state[b, j, 2], state[b, j, 3], state[b, j, 4]
+            )
             theta_mean += theta[b, j]
         theta_mean /= n
         out_of_bounds = False
         min_sep = np.inf
         for j in range(n):
             sx, sy = state[b, j, 0], state[b, j, 1]
-            if sx < workspace[0] or sx > workspace[1] or sy < workspace[2] or sy > workspace[3]:
+            if outside_workspace(sx, sy, workspace[0], workspace[1], workspace[2], workspace[3]):
                 out_of_bounds = True
-            if abs(state[b, j, 3]) > max_speed or abs(state[b, j, 4]) > max_speed:
-                out_of_bounds = True
-            if abs(state[b, j, 5]) > max_yaw_rate:
+            if outside_envelope(state[b, j, 3], state[b, j, 4], state[b, j, 5], max_speed, max_yaw_rate):
                 out_of_bounds = True
             for m in range(6):
                 if not np.isfinite(state[b, j, m]):
@@ -223,25 +241,27 @@ def _kernel(  # type: ignore[no-untyped-def]
             theta_j, xdot_j = theta[b, j], xdot[b, j]
             psi_w = wrap_angle(state[b, j, 2])
             own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b])
-            for f in range(7):
+            for f in range(OWN_SIZE):
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
             for kk in range(n - 1):
                 i = slot_index[j, kk]
-                base = 7 + 4 * kk
+                base = OWN_SIZE + SLOT_SIZE * kk
                 link = slot_mask[j, kk]
-                obs[b, j, base] = link
-                obs[b, j, base + 1] = _clip(link * (theta_j - theta[b, i]), obs_low[base + 1], obs_high[base + 1])
-                obs[b, j, base + 2] = _clip(link * (xdot_j - xdot[b, i]), obs_low[base + 2], obs_high[base + 2])
-                obs[b, j, base + 3] = 0.0
+                d_theta, d_xdot = slot_differences(link, theta_j, theta[b, i], xdot_j, xdot[b, i])
+                obs[b, j, base + LINK] = link
+                obs[b, j, base + COORDINATION] = _clip(
+                    d_theta, obs_low[base + COORDINATION], obs_high[base + COORDINATION]
+                )
+                obs[b, j, base + VELOCITY] = _clip(d_xdot, obs_low[base + VELOCITY], obs_high[base + VELOCITY])
+                obs[b, j, base + AGE] = 0.0
             errors = (e_j, psi_w, theta_j - theta_mean, xdot_j - u_d[b])
             for c in range(4):
-                z2 = (errors[c] / sigmas[c]) ** 2
-                comps[c, b, j] = -dt * weights[c] * (z2 / (1.0 + z2))
+                comps[c, b, j] = cost_term(weights[c], errors[c], sigmas[c], dt)
             sq = 0.0
             for f in range(actions.shape[2]):
                 sq += actions[b, j, f] * actions[b, j, f]
-            comps[4, b, j] = -dt * weights[4] * (sq / actions.shape[2])
-            comps[5, b, j] = -terminal_penalty * max(time_left[b], 0.0) if terminated else 0.0
+            comps[4, b, j] = effort_term(weights[4], sq / actions.shape[2], dt)
+            comps[5, b, j] = terminal_term(terminated, terminal_penalty, time_left[b])
             total = 0.0
             for c in range(6):
                 total += comps[c, b, j]
@@ -255,8 +275,24 @@ def _renamed(fn: Any, name: str) -> Any:
     return copy
 
 
-_serial = njit(cache=True)(_kernel)
-_parallel = njit(cache=True, parallel=True)(_renamed(_kernel, "_kernel_parallel"))
+def source_key() -> str:
+    """A digest of the sources the kernel compiles in besides this file's (model, controllers, step rules).
+
+    numba's on-disk cache is invalidated only when the file that holds the
+    jitted function changes, not when a function it calls from another module
+    does. The kernel's name carries this digest, so an edit of a rule in
+    :mod:`~marine_formation_env.rules` (or of the model or a controller)
+    compiles a new kernel instead of loading a stale one from the cache.
+    """
+    digest = hashlib.sha256()
+    for module in (dynamics, control, rules):
+        digest.update(inspect.getsource(module).encode())
+    return digest.hexdigest()[:16]
+
+
+_KEY = source_key()
+_serial = njit(cache=True)(_renamed(_kernel, f"_kernel_{_KEY}"))
+_parallel = njit(cache=True, parallel=True)(_renamed(_kernel, f"_kernel_parallel_{_KEY}"))
 
 #: Formations from which the multi-threaded kernel is used.
 PARALLEL_FROM = 64

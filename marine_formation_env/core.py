@@ -64,6 +64,20 @@ from marine_formation_env.dynamics import (
     wrap_angle,
 )
 from marine_formation_env.errors import float_array
+from marine_formation_env.rules import (
+    COORDINATION,
+    LINK,
+    OWN_FEATURES,
+    SLOT_FEATURES,
+    VELOCITY,
+    along_track,
+    cost_term,
+    effort_term,
+    outside_envelope,
+    outside_workspace,
+    slot_differences,
+    terminal_term,
+)
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -76,8 +90,6 @@ __all__ = [
     "reset_output",
 ]
 
-OWN_FEATURES = ("cross_track_error", "heading", "surge", "sway", "yaw_rate", "desired_speed", "desired_speed_rate")
-SLOT_FEATURES = ("linked", "coordination_error", "velocity_difference", "age")
 REWARD_COMPONENTS = ("cross_track", "heading", "coordination", "speed", "effort", "terminal")
 
 
@@ -208,11 +220,6 @@ def resolve_backend(backend: str) -> str:
     if backend == "numba" and importlib.util.find_spec("numba") is None:
         raise ImportError("backend 'numba' needs numba: pip install 'marine-formation-env[fast]'")
     return backend
-
-
-def _bounded_cost(error: np.ndarray, sigma: float) -> np.ndarray:
-    z2 = np.square(error / sigma)
-    return z2 / (1.0 + z2)
 
 
 class FormationCore:
@@ -617,9 +624,7 @@ class FormationCore:
         ẋ is through the water (``u cos ψ − v sin ψ``), or with ``inertial`` over
         ground, adding the current's V_x at ``time`` ``(b,)``.
         """
-        psi, u, v = s[..., PSI], s[..., U], s[..., V]
-        theta = s[..., X] - self._dx
-        x_dot = u * np.cos(psi) - v * np.sin(psi)
+        theta, x_dot = along_track(s[..., X], self._dx, s[..., PSI], s[..., U], s[..., V])
         if inertial and self._current is not None:
             x_dot = x_dot + current_velocity(*self._current, np.asarray(time)[:, None])[0]
         return theta, x_dot
@@ -643,9 +648,10 @@ class FormationCore:
         if self.channel is None:
             theta, x_dot = self._along_track(s)
             idx = self._slot_index
-            slots[..., 0] = self._slot_mask
-            slots[..., 1] = self._slot_mask * (theta[:, :, None] - theta[:, idx])
-            slots[..., 2] = self._slot_mask * (x_dot[:, :, None] - x_dot[:, idx])
+            slots[..., LINK] = self._slot_mask
+            slots[..., COORDINATION], slots[..., VELOCITY] = slot_differences(
+                self._slot_mask, theta[:, :, None], theta[:, idx], x_dot[:, :, None], x_dot[:, idx]
+            )
         else:
             theta, x_dot = self._along_track(s, time, inertial=True)
             for k, feature in enumerate(self.channel.slots(ids, self._slot_index, time, theta, x_dot)):
@@ -674,33 +680,28 @@ class FormationCore:
         s = self.state
         theta, x_dot = self._along_track(s)
         u_d = cfg.u_d.value(self.time)[:, None]
-        scale = -cfg.dt
+        dt = cfg.dt
         components = {
-            "cross_track": scale * w.cross_track * _bounded_cost(s[..., Y] - self._dy, w.sigma_cross_track),
-            "heading": scale * w.heading * _bounded_cost(wrap_angle(s[..., PSI]), w.sigma_heading),
-            "coordination": scale
-            * w.coordination
-            * _bounded_cost(theta - theta.mean(axis=1, keepdims=True), w.sigma_coordination),
-            "speed": scale * w.speed * _bounded_cost(x_dot - u_d, w.sigma_speed),
-            "effort": scale * w.effort * np.mean(np.square(actions), axis=-1),
+            "cross_track": cost_term(w.cross_track, s[..., Y] - self._dy, w.sigma_cross_track, dt),
+            "heading": cost_term(w.heading, wrap_angle(s[..., PSI]), w.sigma_heading, dt),
+            "coordination": cost_term(
+                w.coordination, theta - theta.mean(axis=1, keepdims=True), w.sigma_coordination, dt
+            ),
+            "speed": cost_term(w.speed, x_dot - u_d, w.sigma_speed, dt),
+            "effort": effort_term(w.effort, np.mean(np.square(actions), axis=-1), dt),
         }
-        x_lo, x_hi, y_lo, y_hi = cfg.workspace
         out_of_bounds = np.any(
-            (s[..., X] < x_lo) | (s[..., X] > x_hi) | (s[..., Y] < y_lo) | (s[..., Y] > y_hi), axis=1
-        )
-        collision = self._min_separation(s) < cfg.safety_distance
-        unstable = ~np.all(np.isfinite(s), axis=(1, 2))
-        out_of_envelope = np.any(
-            (np.abs(s[..., U]) > cfg.max_speed)
-            | (np.abs(s[..., V]) > cfg.max_speed)
-            | (np.abs(s[..., R]) > cfg.max_yaw_rate),
+            outside_workspace(s[..., X], s[..., Y], *cfg.workspace)
+            | outside_envelope(s[..., U], s[..., V], s[..., R], cfg.max_speed, cfg.max_yaw_rate),
             axis=1,
         )
-        out_of_bounds = out_of_bounds | out_of_envelope | unstable
+        out_of_bounds |= ~np.all(np.isfinite(s), axis=(1, 2))  # an unstable state ends the episode too
+        collision = self._min_separation(s) < cfg.safety_distance
         terminated = out_of_bounds | collision
-        time_left = np.maximum(cfg.horizon - self.time, 0.0)
-        penalty = -w.total_weight * time_left if w.terminal_penalty else np.zeros_like(time_left)
-        components["terminal"] = np.where(terminated, penalty, 0.0)[:, None] * np.ones((1, self.n))
+        rate = w.total_weight if w.terminal_penalty else 0.0
+        components["terminal"] = np.broadcast_to(
+            terminal_term(terminated, rate, cfg.horizon - self.time)[:, None], (self.num_envs, self.n)
+        ).copy()
         reward = sum(components.values())
         truncated = (self.steps >= cfg.max_steps) & ~terminated
         return StepOutput(

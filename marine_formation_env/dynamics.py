@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env.params import VesselParams
+from marine_formation_env.rules import rk4_combine
 
 __all__ = [
     "PSI",
@@ -163,4 +164,4 @@ def rk4_step(rhs: Callable[[float, np.ndarray], np.ndarray], state: np.ndarray, 
     k2 = rhs(t + half, state + half * k1)
     k3 = rhs(t + half, state + half * k2)
     k4 = rhs(t + h, state + h * k3)
-    return state + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
+    return rk4_combine(state, k1, k2, k3, k4, h)

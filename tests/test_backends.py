@@ -154,3 +154,18 @@ def test_backend_selection(monkeypatch: pytest.MonkeyPatch) -> None:
         resolve_backend("auto")
     with pytest.raises(ValueError, match="'fortran'"):
         marine_formation_env.parallel_env(backend="fortran")
+
+
+def test_kernel_cache_follows_the_sources_it_compiles_in():
+    """numba's disk cache only watches the jitted function's own file; the kernel's name carries the others'."""
+    import hashlib
+    import inspect
+
+    from marine_formation_env import _numba, control, dynamics, rules
+
+    digest = hashlib.sha256()
+    for module in (dynamics, control, rules):
+        digest.update(inspect.getsource(module).encode())
+    key = digest.hexdigest()[:16]
+    assert _numba.step_kernel(1).__name__ == f"_kernel_{key}"
+    assert _numba.step_kernel(_numba.PARALLEL_FROM).__name__ == f"_kernel_parallel_{key}"
