@@ -38,13 +38,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
-from marine_formation_env import ACTION_LEVELS, ENV_ID
+from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.env import parallel_env
+from training import run_folder
 from training.callbacks import EVAL_SEED, WallClockBudget, evaluate_policy_episodes
 from training.config import apply_overrides, load_config, validate
 from training.learned import ModelPolicy
@@ -71,10 +70,15 @@ def run_benchmark(
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
     resolved = validate(apply_overrides(load_config(path), {"n_timesteps": 10**9, "eval_freq": 0}))
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump({ENV_ID: {**resolved, "seed": seed}}, sort_keys=False))
     start = time.perf_counter()
-    model = train(resolved, out, seed, progress=progress, extra_callbacks=[WallClockBudget(60.0 * minutes)])
+    model = train(
+        resolved,
+        out,
+        seed,
+        progress=progress,
+        extra_callbacks=[WallClockBudget(60.0 * minutes)],
+        config_record={**resolved, "seed": seed},
+    )
     wall = time.perf_counter() - start
     env = parallel_env(resolved["scenario"], **resolved["env_kwargs"])
     policies = {
@@ -107,7 +111,7 @@ def run_benchmark(
         "success": {name: s["success"]["mean"] for name, s in summaries.items()},
         "target_met": bool(r["reference"] / r["learned"] >= 0.9) if r["learned"] else False,
     }
-    (out / "benchmark.json").write_text(json.dumps(report, indent=2))
+    run_folder.write_bytes(out / "benchmark.json", json.dumps(report, indent=2).encode())
     return report
 
 

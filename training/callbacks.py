@@ -1,9 +1,14 @@
-"""SB3 callbacks: periodic evaluation against the reference policy, and a wall-clock budget."""
+"""SB3 callbacks: evaluation against the reference, atomic checkpoints, a wall-clock budget, Ctrl-C.
+
+Everything they write goes through :mod:`training.run_folder` (temporary file,
+fsync, rename), so a run killed at any instant leaves readable files.
+"""
 
 from __future__ import annotations
 
-import csv
 import json
+import pickle
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -15,9 +20,17 @@ from baselines.metrics import episode_metrics, summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import run_episode
 from marine_formation_env.env import parallel_env
-from training.learned import ModelPolicy
+from training import run_folder
+from training.learned import ModelPolicy, load_learned_policy
 
-__all__ = ["EVAL_SEED", "ReferenceEvalCallback", "WallClockBudget", "evaluate_policy_episodes"]
+__all__ = [
+    "EVAL_SEED",
+    "AtomicCheckpointCallback",
+    "ReferenceEvalCallback",
+    "StopRequest",
+    "WallClockBudget",
+    "evaluate_policy_episodes",
+]
 
 #: Evaluation episodes use seeds EVAL_SEED + k, disjoint from the training seeds.
 EVAL_SEED = 1_000_000
@@ -41,8 +54,16 @@ class ReferenceEvalCallback(BaseCallback):
     Logs ``eval/<metric>_learned``, ``eval/<metric>_reference`` and
     ``eval/return_ratio`` (reference return / learned return: 1 means equal,
     below 1 means the learned policy costs more; returns are ≤ 0) to
-    TensorBoard, appends a row to ``evaluations.csv`` and keeps the best model
-    (highest mean learned return) as ``best_model.zip`` + ``best_vecnormalize.pkl``.
+    TensorBoard, appends a row to ``evaluations.csv`` (rewritten atomically)
+    and keeps the best model (highest mean learned return) as
+    ``best_model.zip`` + ``best_vecnormalize.pkl`` + ``best_model.json`` (its
+    evaluation row and ``eval_episodes``), replaced together
+    (:func:`training.run_folder.write_together`) *before* the row is appended,
+    so the recorded best is never below a row of ``evaluations.csv``.
+
+    A resumed run calls :meth:`restore_best` first, so the best score of the
+    earlier part of the run is kept (a later evaluation replaces
+    ``best_model.zip`` only if it beats it).
     """
 
     def __init__(
@@ -72,39 +93,115 @@ class ReferenceEvalCallback(BaseCallback):
             self.evaluate()
         return True
 
+    def _row(self, learned: dict[str, Any], timesteps: int, wall_time: float) -> dict[str, Any]:
+        row: dict[str, Any] = {"timesteps": int(timesteps), "wall_time": wall_time}
+        for key in LOGGED:
+            for label, summary in (("learned", learned), ("reference", self.reference)):
+                row[f"{key}_{label}"] = summary[key]["mean"] if key in summary else float("nan")
+        mean = learned["return"]["mean"]
+        row["return_ratio"] = self.reference["return"]["mean"] / mean if mean else np.nan
+        return row
+
+    def restore_best(self) -> float:
+        """Take the best score from ``best_model.json`` (a resumed run); return it (−inf if none).
+
+        A best model scored on another number of episodes than ``self.episodes``
+        (``eval_episodes`` changed on resume) is re-scored on the current
+        evaluation seeds first, and ``best_model.json`` is rewritten, so the
+        comparison with the coming evaluations is like for like.
+        """
+        record = run_folder.read_best(self.out_dir)
+        if record is None or not (self.out_dir / "best_model.zip").is_file():
+            self.best = -np.inf
+            return self.best
+        if int(record.get("eval_episodes", self.episodes)) == self.episodes:
+            self.best = float(record["return_learned"])
+            return self.best
+        try:
+            policy, _ = load_learned_policy(self.out_dir / "best_model.zip")
+        except Exception as err:  # written atomically, so only damaged by hand: start the comparison afresh
+            reason = " ".join(f"{type(err).__name__}: {err}".split())
+            print(
+                f"cannot re-score {self.out_dir / 'best_model.zip'} ({reason}); the next evaluation replaces it",
+                file=sys.stderr,
+            )
+            self.best = -np.inf
+            return self.best
+        learned = summarize(evaluate_policy_episodes(self.env, policy, self.episodes))
+        row = self._row(learned, int(record["timesteps"]), float(record.get("wall_time", time.time())))
+        run_folder.write_bytes(
+            self.out_dir / "best_model.json", json.dumps({**row, "eval_episodes": self.episodes}).encode()
+        )
+        self.best = float(row["return_learned"])
+        return self.best
+
     def evaluate(self) -> dict[str, Any]:
         """Run the evaluation now; return the learned policy's summary."""
         normalizer = self.model.get_vec_normalize_env()
         learned = summarize(evaluate_policy_episodes(self.env, ModelPolicy(self.model, normalizer), self.episodes))
-        row: dict[str, Any] = {"timesteps": self.num_timesteps, "wall_time": time.time()}
-        for key in LOGGED:
-            for label, summary in (("learned", learned), ("reference", self.reference)):
-                value = summary[key]["mean"] if key in summary else float("nan")
-                self.logger.record(f"eval/{key}_{label}", value)
-                row[f"{key}_{label}"] = value
-        ratio = self.reference["return"]["mean"] / learned["return"]["mean"] if learned["return"]["mean"] else np.nan
-        self.logger.record("eval/return_ratio", ratio)
-        row["return_ratio"] = ratio
+        row = self._row(learned, self.num_timesteps, time.time())
+        for key, value in row.items():
+            if key not in ("timesteps", "wall_time"):
+                self.logger.record(f"eval/{key}", value)
         self.logger.dump(self.num_timesteps)
-        path = self.out_dir / "evaluations.csv"
-        new = not path.exists()
-        with path.open("a", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=list(row))
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
         if learned["return"]["mean"] > self.best:
             self.best = learned["return"]["mean"]
-            self.model.save(self.out_dir / "best_model.zip")
+            record = json.dumps({**row, "eval_episodes": self.episodes}).encode()
+            model = self.model
+            writers: dict[str, Any] = {"best_model.zip": model.save}
             if normalizer is not None:
-                normalizer.save(str(self.out_dir / "best_vecnormalize.pkl"))
-            (self.out_dir / "best_model.json").write_text(json.dumps({"timesteps": self.num_timesteps, **row}))
+                writers["best_vecnormalize.pkl"] = lambda handle: pickle.dump(normalizer, handle)
+            writers["best_model.json"] = lambda handle: handle.write(record)
+            run_folder.write_together(self.out_dir, writers)
+        path = self.out_dir / "evaluations.csv"
+        run_folder.write_evaluations(path, [*run_folder.read_evaluations(path), row])
         if self.verbose:
             print(
                 f"[eval] {self.num_timesteps} steps: return learned {learned['return']['mean']:.2f} "
-                f"vs reference {self.reference['return']['mean']:.2f} (ratio {ratio:.3f})"
+                f"vs reference {self.reference['return']['mean']:.2f} (ratio {row['return_ratio']:.3f})"
             )
         return learned
+
+
+class AtomicCheckpointCallback(BaseCallback):
+    """Save a checkpoint each time the step count passes a multiple of ``every`` vessel-steps.
+
+    Replaces SB3's ``CheckpointCallback`` with the same file names
+    (``checkpoints/model_<N>_steps.zip``, ``checkpoints/model_vecnormalize_<N>_steps.pkl``),
+    but each file is written atomically and the statistics before the model
+    (:func:`training.run_folder.save_checkpoint`).
+    """
+
+    def __init__(self, out_dir: Path, every: int, verbose: int = 0) -> None:
+        super().__init__(verbose)
+        if every < 1:
+            raise ValueError(f"checkpoint interval must be ≥ 1 vessel-step, got {every}")
+        self.out_dir = Path(out_dir)
+        self.every = int(every)
+        self._mark = 0
+
+    def _on_training_start(self) -> None:
+        self._mark = self.num_timesteps // self.every
+
+    def _on_step(self) -> bool:
+        mark = self.num_timesteps // self.every
+        if mark > self._mark:
+            self._mark = mark
+            path = run_folder.save_checkpoint(self.model, self.out_dir)
+            if self.verbose:
+                print(f"saved checkpoint {path}")
+        return True
+
+
+class StopRequest(BaseCallback):
+    """Stop training at the next step once :attr:`requested` is set (e.g. by a SIGINT handler)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.requested = False
+
+    def _on_step(self) -> bool:
+        return not self.requested
 
 
 class WallClockBudget(BaseCallback):

@@ -24,6 +24,17 @@ overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
 unknown keys raise :class:`TrainConfigError` naming them. ``learning_rate``
 may be ``lin_<value>`` (linear decay to 0, as in the zoo); ``activation_fn`` is
 a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``).
+
+Values SB3 or torch would choke on (or, worse, accept and fail on much later)
+are refused here by name: ``n_steps``, ``batch_size``, ``n_epochs``,
+``buffer_size``, ... must be whole numbers ≥ 1; ``gamma``, ``gae_lambda``,
+``tau`` lie in [0, 1]; ``learning_rate``, ``clip_range``, ``max_grad_norm`` are
+positive; ``policy_kwargs.net_arch`` is a list of positive whole numbers (or a
+mapping of such lists, ``pi``/``vf`` for PPO and A2C, ``pi``/``qf`` for SAC
+and TD3); ``policy`` is one of the algorithm's ``policy_aliases``.
+``training.train`` then builds the algorithm once on the real env and reports
+whatever else its constructor rejects. Malformed YAML is reported with the
+file name and the parser's line and column.
 """
 
 from __future__ import annotations
@@ -39,7 +50,17 @@ import yaml
 from marine_formation_env import ENV_ID
 from marine_formation_env.scenarios import ConfigError, make_config
 
-__all__ = ["ALGOS", "SPECIAL_KEYS", "TrainConfigError", "algo_class", "apply_overrides", "load_config", "validate"]
+__all__ = [
+    "ALGOS",
+    "RESUMABLE_KEYS",
+    "SPECIAL_KEYS",
+    "TrainConfigError",
+    "algo_class",
+    "apply_overrides",
+    "config_differences",
+    "load_config",
+    "validate",
+]
 
 #: Keys with a meaning for the training script (everything else goes to the algorithm).
 SPECIAL_KEYS = {
@@ -56,7 +77,31 @@ SPECIAL_KEYS = {
     "checkpoint_freq": 500_000,
 }
 
+#: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
+RESUMABLE_KEYS = ("n_timesteps", "eval_freq", "eval_episodes", "checkpoint_freq")
+
 ALGOS = ("ppo", "sac", "td3", "a2c")
+#: Hyperparameters that must be whole numbers ≥ 1 (when the algorithm has them).
+POSITIVE_INTS = (
+    "n_steps",
+    "batch_size",
+    "n_epochs",
+    "buffer_size",
+    "target_update_interval",
+    "policy_delay",
+    "stats_window_size",
+)
+#: Hyperparameters that must be numbers in a closed interval; ``None`` means unbounded.
+NUMBER_RANGES: dict[str, tuple[float | None, float | None]] = {
+    "gamma": (0.0, 1.0),
+    "gae_lambda": (0.0, 1.0),
+    "tau": (0.0, 1.0),
+    "vf_coef": (0.0, None),
+    "target_policy_noise": (0.0, None),
+    "target_noise_clip": (0.0, None),
+}
+#: Hyperparameters that must be numbers > 0.
+POSITIVE_NUMBERS = ("learning_rate", "clip_range", "max_grad_norm")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
 _NOT_HYPERPARAMS = {"self", "policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model"}
 
@@ -93,15 +138,56 @@ _Loader.add_implicit_resolver(
 
 
 def load_config(path: str | Path) -> dict[str, Any]:
-    """Read a config file and return its (unvalidated) mapping for ``MarineFormation-v0``."""
+    """Read a config file and return its (unvalidated) mapping for ``MarineFormation-v0``.
+
+    Raises:
+        TrainConfigError: a missing or unreadable file, malformed YAML (with the
+            parser's line and column), or not one mapping under the env id.
+    """
     path = Path(path)
     if not path.is_file():
         raise TrainConfigError(f"config file {str(path)!r} does not exist")
-    data = yaml.load(path.read_text(), Loader=_Loader)
+    try:
+        data = yaml.load(path.read_text(encoding="utf-8"), Loader=_Loader)
+    except UnicodeDecodeError as err:
+        raise TrainConfigError(f"config file {str(path)!r} is not UTF-8 ({err.reason} at byte {err.start})") from None
+    except yaml.YAMLError as err:
+        raise TrainConfigError(f"config file {str(path)!r} is not valid YAML: {_yaml_problem(err)}") from None
     if not isinstance(data, dict) or list(data) != [ENV_ID] or not isinstance(data[ENV_ID], dict):
         keys = list(data) if isinstance(data, dict) else type(data).__name__
         raise TrainConfigError(f"{path}: expected one mapping under {ENV_ID!r}, found {keys}")
     return dict(data[ENV_ID])
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    """``line L, column C: <problem>`` (1-based, where the parser stopped) from a PyYAML error."""
+    if isinstance(err, yaml.MarkedYAMLError):
+        mark = err.problem_mark or err.context_mark
+        problem = " ".join(part for part in (err.context, err.problem) if part) or "syntax error"
+        if mark is not None:
+            return f"line {mark.line + 1}, column {mark.column + 1}: {problem}"
+        return problem
+    return " ".join(str(err).split())
+
+
+def config_differences(old: Any, new: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
+    """``(dotted key, old value, new value)`` for every leaf where two configs differ (missing = None)."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        out: list[tuple[str, Any, Any]] = []
+        for key in list(old) + [k for k in new if k not in old]:
+            out.extend(config_differences(old.get(key), new.get(key), f"{prefix}{key}."))
+        return out
+    if (old == new and type(old) is type(new)) or _same_number(old, new):
+        return []
+    return [(prefix[:-1], old, new)]
+
+
+def _same_number(a: Any, b: Any) -> bool:
+    numbers = (int, float)
+    return (
+        isinstance(a, numbers) and isinstance(b, numbers) and not isinstance(a, bool) and not isinstance(b, bool)
+        and a == b
+    )  # fmt: skip
 
 
 def apply_overrides(config: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -160,16 +246,97 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     norm = resolved["normalize"]
     if not isinstance(norm, (bool, dict)):
         raise TrainConfigError(f"normalize must be true/false or a mapping of VecNormalize arguments, got {norm!r}")
+    _check_policy(resolved, cls)
+    _check_hyperparameters(resolved)
     return resolved
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _whole(key: str, value: Any, minimum: int) -> int:
+    """``value`` as an int if it is a whole number ≥ ``minimum`` (``1e3`` and ``1000.0`` count), else raise."""
+    if _is_number(value) and float(value).is_integer() and value >= minimum:
+        return int(value)
+    raise TrainConfigError(f"{key} must be a whole number ≥ {minimum}, got {value!r}")
+
+
+def _check_policy(resolved: dict[str, Any], cls: Any) -> None:
+    policy = resolved["policy"]
+    aliases = sorted(getattr(cls, "policy_aliases", {}))
+    if not isinstance(policy, str) or policy not in aliases:
+        raise TrainConfigError(f"policy must be one of {aliases} for algo {resolved['algo']!r}, got {policy!r}")
+    net_arch = resolved["policy_kwargs"].get("net_arch")
+    if net_arch is None:
+        return
+    heads = ("pi", "vf") if resolved["algo"] in ("ppo", "a2c") else ("pi", "qf")
+    expected = f"a list of whole numbers ≥ 1 or a mapping with keys {list(heads)} of such lists"
+
+    def layers(value: Any) -> bool:
+        return isinstance(value, list) and all(_is_number(v) and float(v).is_integer() and v >= 1 for v in value)
+
+    if isinstance(net_arch, dict):
+        ok = set(net_arch) <= set(heads) and bool(net_arch) and all(layers(v) for v in net_arch.values())
+    else:
+        ok = layers(net_arch)
+    if not ok:
+        raise TrainConfigError(f"policy_kwargs.net_arch must be {expected}, got {net_arch!r}")
+    if isinstance(net_arch, dict):
+        resolved["policy_kwargs"]["net_arch"] = {k: [int(v) for v in vals] for k, vals in net_arch.items()}
+    else:
+        resolved["policy_kwargs"]["net_arch"] = [int(v) for v in net_arch]
+
+
+def _check_hyperparameters(resolved: dict[str, Any]) -> None:
+    value: Any
+    for key in POSITIVE_INTS:
+        if key in resolved:
+            resolved[key] = _whole(key, resolved[key], 1)
+    if "learning_starts" in resolved:
+        resolved["learning_starts"] = _whole("learning_starts", resolved["learning_starts"], 0)
+    if "gradient_steps" in resolved:
+        value = resolved["gradient_steps"]
+        if not (_is_number(value) and float(value).is_integer() and (value >= 1 or value == -1)):
+            raise TrainConfigError(f"gradient_steps must be a whole number ≥ 1 or -1, got {value!r}")
+        resolved["gradient_steps"] = int(value)
+    if "train_freq" in resolved:
+        value = resolved["train_freq"]
+        if isinstance(value, (list, tuple)):
+            if len(value) != 2 or value[1] not in ("step", "episode"):
+                raise TrainConfigError(f"train_freq must be a whole number ≥ 1 or [n, 'step'|'episode'], got {value!r}")
+            resolved["train_freq"] = (_whole("train_freq", value[0], 1), value[1])
+        else:
+            resolved["train_freq"] = _whole("train_freq", value, 1)
+    for key, (low, high) in NUMBER_RANGES.items():
+        if key not in resolved:
+            continue
+        value = resolved[key]
+        if not _is_number(value) or (low is not None and value < low) or (high is not None and value > high):
+            bounds = f"in [{low}, {high}]" if high is not None else f"≥ {low}"
+            raise TrainConfigError(f"{key} must be a number {bounds}, got {value!r}")
+    for key in POSITIVE_NUMBERS:
+        value = resolved.get(key)
+        if key not in resolved or (key == "learning_rate" and isinstance(value, str)):
+            continue  # 'lin_<x>' schedules are checked above
+        if not _is_number(value) or not value > 0:
+            raise TrainConfigError(f"{key} must be a number > 0, got {value!r}")
+    ent: Any = resolved.get("ent_coef")
+    auto = resolved["algo"] == "sac" and isinstance(ent, str) and ent.startswith("auto")
+    if "ent_coef" in resolved and not ((_is_number(ent) and ent >= 0) or auto):
+        raise TrainConfigError(f"ent_coef must be a number ≥ 0 (or 'auto' for sac), got {ent!r}")
 
 
 def _parse_schedule(value: str) -> float:
     if not value.startswith("lin_"):
         raise TrainConfigError(f"learning_rate must be a number or 'lin_<number>', got {value!r}")
     try:
-        return float(value[4:])
+        start = float(value[4:])
     except ValueError:
         raise TrainConfigError(f"learning_rate must be a number or 'lin_<number>', got {value!r}") from None
+    if not start > 0:
+        raise TrainConfigError(f"learning_rate must be > 0, got {value!r}")
+    return start
 
 
 def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:

@@ -124,7 +124,7 @@ def _vecnormalize_path(model_path: Path) -> Path | None:
     if model_path.name == "model.zip" or model_path.name == "best_model.zip":
         candidate = model_path.with_name(model_path.stem.replace("model", "vecnormalize") + ".pkl")
         return candidate if candidate.is_file() else None
-    # CheckpointCallback names: model_<N>_steps.zip and model_vecnormalize_<N>_steps.pkl
+    # checkpoint names (training.run_folder): model_<N>_steps.zip and model_vecnormalize_<N>_steps.pkl
     stem = model_path.stem
     if stem.startswith("model_") and stem.endswith("_steps"):
         candidate = model_path.with_name(f"model_vecnormalize_{stem[len('model_') :]}.pkl")
