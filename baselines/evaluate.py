@@ -45,9 +45,10 @@ from typing import Any
 
 import numpy as np
 
-from baselines.metrics import episode_metrics, summarize
+from baselines.engine import episode_reports
+from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
-from baselines.rollout import RandomPolicy, Trajectory, run_episode
+from baselines.rollout import RandomPolicy, Trajectory
 from marine_formation_env.atomic import atomic_path, atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
@@ -178,17 +179,12 @@ def evaluate(
     }
     first: dict[str, Trajectory] = {}
     bar = progress_bar(len(policies) * episodes, progress)
+    seeds = [seed + k for k in range(episodes)]
     for label in policies:
-        policy = make_policy(label, env, seed, loaded)
-        per_episode = []
-        for k in range(episodes):
-            traj = run_episode(env, policy, seed=seed + k)
-            first.setdefault(label, traj)
-            metrics = episode_metrics(traj, cfg)
-            metrics["seed"] = seed + k
-            per_episode.append(metrics)
-            if bar is not None:
-                bar.update(1)
+        per_episode, trajectories = episode_reports(make_policy(label, env, seed, loaded), cfg, seeds)
+        first[label] = trajectories[0]
+        if bar is not None:
+            bar.update(episodes)
         report["policies"][label] = {"episodes": per_episode, "summary": summarize(per_episode)}
     if bar is not None:
         bar.close()

@@ -1,9 +1,11 @@
-"""Run a policy in the ParallelEnv and record what happened, as arrays.
+"""Policies and the record of an episode.
 
 A *policy* is any object with ``act(observations) -> actions`` over the
-PettingZoo dicts; if it also has ``commanded_speed(observations) -> {agent:
-u_c}`` (the reference policy does), the commanded speeds are recorded even at
-the ``force`` level, where the env never sees them.
+PettingZoo dicts; a :class:`BatchPolicy` also acts on stacked observations
+(``act_batch``), which lets the evaluation engine (:mod:`baselines.engine`)
+run many episodes at once. :class:`Trajectory` is what an episode leaves:
+states, commands, actions and rewards as arrays. :func:`run_episode` records
+one episode (through the engine).
 """
 
 from __future__ import annotations
@@ -84,16 +86,17 @@ class Trajectory:
         return {prefix + k: v for k, v in out.items()}
 
 
-class RandomPolicy:
-    """Uniform random actions from the env's action spaces, seeded."""
+class RandomPolicy(BatchPolicy):
+    """Uniform random actions in [−1, 1], seeded (a batch policy: one draw per vessel and step)."""
 
-    def __init__(self, env: MarineFormationParallelEnv, seed: int | None = None) -> None:
-        self.env = env
+    def __init__(self, env: Any, seed: int | None = None) -> None:
+        config = getattr(getattr(env, "unwrapped", env), "config", env)
+        self.action_dim = int(config.action_dim)
         self.rng = np.random.default_rng(seed)
 
-    def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        dim = self.env.config.action_dim
-        return {a: self.rng.uniform(-1.0, 1.0, dim).astype(np.float32) for a in observations}
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """Actions ``(..., A)`` drawn uniformly for observations ``(..., dim)``."""
+        return self.rng.uniform(-1.0, 1.0, (*np.shape(obs)[:-1], self.action_dim)).astype(np.float32)
 
 
 def run_episode(
@@ -102,56 +105,18 @@ def run_episode(
     seed: int | None = None,
     options: dict[str, Any] | None = None,
 ) -> Trajectory:
-    """Roll out one episode of ``policy`` in ``env`` and record it.
+    """Roll out one episode of ``policy`` on ``env``'s scenario and record it.
+
+    The episode is the one ``env.reset(seed=seed, options=options)`` starts;
+    it runs on the evaluation engine (:func:`baselines.engine.evaluate_episodes`,
+    one formation, ``env``'s backend), which leaves ``env`` itself untouched.
 
     Args:
-        env: a ParallelEnv of this package (not wrapped: the physical state is
-            read from it for the record, never passed to the policy).
-        policy: has ``act(observations)``; optionally ``commanded_speed``,
-            and ``reset()``, called before the episode starts (stateful
-            policies such as the reference with integral LOS).
-        seed, options: passed to ``env.reset``.
+        env: a ParallelEnv of this package (its configuration and backend are used).
+        policy: has ``act(observations)`` or ``act_batch``; optionally
+            ``commands`` and ``reset()`` (see :mod:`baselines.engine`).
+        seed, options: the reset seed and options.
     """
-    cfg = env.config
-    n, steps = cfg.n_vessels, cfg.max_steps
-    obs, _ = env.reset(seed=seed, options=options)
-    if callable(getattr(policy, "reset", None)):
-        policy.reset()
-    agents = list(env.possible_agents)
-    states = np.empty((steps + 1, n, 6))
-    times = np.empty(steps + 1)
-    u_c = np.full((steps, n), np.nan)
-    actions = np.zeros((steps, n, cfg.action_dim))
-    rewards = np.zeros((steps, n))
-    components: dict[str, np.ndarray] = {}
-    states[0], times[0] = env.vessel_states, env.time
-    speed_of = getattr(policy, "commanded_speed", None)
-    k = 0
-    terminated = truncated = collision = False
-    while env.agents:
-        act = policy.act(obs)
-        if speed_of is not None:
-            u_c[k] = [speed_of(obs)[a] for a in agents]
-        obs, rew, term, trunc, infos = env.step(act)
-        actions[k] = np.clip([np.asarray(act[a], dtype=float).reshape(-1) for a in agents], -1.0, 1.0)
-        rewards[k] = [rew[a] for a in agents]
-        for name in infos[agents[0]]["reward_components"]:
-            components.setdefault(name, np.zeros((steps, n)))[k] = [infos[a]["reward_components"][name] for a in agents]
-        if "commanded_speed" in infos[agents[0]]:
-            u_c[k] = [infos[a]["commanded_speed"] for a in agents]
-        k += 1
-        states[k], times[k] = env.vessel_states, env.time
-        terminated, truncated = any(term.values()), any(trunc.values())
-        collision = bool(infos[agents[0]]["collision"])
-    return Trajectory(
-        t=times[: k + 1],
-        state=states[: k + 1],
-        u_d=np.asarray(cfg.u_d.value(times[: k + 1]), dtype=float),
-        commanded_speed=u_c[:k],
-        actions=actions[:k],
-        rewards=rewards[:k],
-        components={name: value[:k] for name, value in components.items()},
-        terminated=terminated,
-        truncated=truncated,
-        collision=collision,
-    )
+    from baselines.engine import evaluate_episodes
+
+    return evaluate_episodes(policy, env.config, [seed], options=options, backend=env.core.backend)[0]

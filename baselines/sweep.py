@@ -31,10 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from baselines.engine import episode_reports
 from baselines.evaluate import is_reference, make_policy, progress_bar
-from baselines.metrics import episode_metrics
 from baselines.plots import save_figure
-from baselines.rollout import run_episode
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
@@ -102,6 +101,7 @@ def sweep(
     cells: dict[str, list[list[dict[str, Any]]]] = {p: [] for p in policies}
     bar = progress_bar(len(losses) * len(latencies) * len(policies) * episodes, progress, desc="sweep")
     config = None
+    seeds = [seed + k for k in range(episodes)]
     for p in losses:
         for label in policies:
             cells[label].append([])  # the row of loss p
@@ -110,13 +110,10 @@ def sweep(
             env = parallel_env(scenario, **base, channel=channel)
             config = env.config
             for label in policies:
-                policy = make_policy(label, env, seed)
-                results = []
-                for k in range(episodes):
-                    results.append(episode_metrics(run_episode(env, policy, seed=seed + k), env.config))
-                    if bar is not None:
-                        bar.update(1)
-                cells[label][-1].append(_cell(results, env.config.horizon))
+                results, _ = episode_reports(make_policy(label, env, seed), config, seeds)
+                if bar is not None:
+                    bar.update(episodes)
+                cells[label][-1].append(_cell(results, config.horizon))
             env.close()
     if bar is not None:
         bar.close()

@@ -11,9 +11,9 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
-from marine_formation_env.frontend import read_reset
+from marine_formation_env.frontend import read_reset, resolve_config
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig, make_config
+from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
 
@@ -174,7 +174,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     | argument           | default              | meaning                                                    |
     |--------------------|----------------------|------------------------------------------------------------|
-    | `scenario`         | `"paper"`            | named defaults (`marine_formation_env.SCENARIOS`)          |
+    | `scenario`         | `"paper"`            | named defaults (`SCENARIOS`), or a ready `ScenarioConfig`  |
     | `render_mode`      | None                 | `"rgb_array"` or `"human"`                                 |
     | `backend`          | `"auto"`             | `numpy` or `numba` (auto: numba if installed); same results |
     | `action_level`     | `"speed"`            | `force`, `guidance` or `speed`                             |
@@ -218,10 +218,14 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     }
 
     def __init__(
-        self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
+        self,
+        scenario: str | ScenarioConfig = "paper",
+        render_mode: str | None = None,
+        backend: str = "auto",
+        **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.config: ScenarioConfig = resolve_config(scenario, overrides)
         self.render_mode = render_mode
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         n = self.config.n_vessels
@@ -396,7 +400,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
 
 def parallel_env(
-    scenario: str = "paper", render_mode: str | None = None, **overrides: Any
+    scenario: str | ScenarioConfig = "paper", render_mode: str | None = None, **overrides: Any
 ) -> MarineFormationParallelEnv:
     """Create the PettingZoo ParallelEnv (see :class:`MarineFormationParallelEnv`)."""
     return MarineFormationParallelEnv(scenario=scenario, render_mode=render_mode, **overrides)

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env.errors import check_seed, float_array
-from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem
+from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config
 
 __all__ = [
     "RESET_OPTIONS",
@@ -37,10 +37,28 @@ __all__ = [
     "check_reset_options",
     "formation_seeds",
     "read_reset",
+    "resolve_config",
 ]
 
 #: The keys ``reset(options=…)`` understands.
 RESET_OPTIONS = ("initial_state", "channel_seed")
+
+
+def resolve_config(scenario: str | ScenarioConfig, overrides: Mapping[str, Any]) -> ScenarioConfig:
+    """The configuration a front end runs: a scenario name with overrides, or a ready :class:`ScenarioConfig`.
+
+    Raises:
+        ConfigError: unknown scenario or override (:func:`make_config`), or
+            overrides given together with a ready configuration.
+    """
+    if isinstance(scenario, ScenarioConfig):
+        if overrides:
+            raise TypeError(
+                f"overrides {sorted(overrides)} cannot be applied to a ready ScenarioConfig; pass a scenario name, "
+                "or build the configuration with make_config(name, **overrides)"
+            )
+        return scenario
+    return make_config(scenario, **overrides)
 
 
 def check_reset_options(options: Any) -> dict[str, Any]:

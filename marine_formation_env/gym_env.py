@@ -30,9 +30,9 @@ import numpy as np
 
 from marine_formation_env.core import FormationCore, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import read_reset
+from marine_formation_env.frontend import read_reset, resolve_config
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig, make_config
+from marine_formation_env.scenarios import ScenarioConfig
 from marine_formation_env.vector import joint_info
 
 __all__ = ["MarineFormationGymEnv"]
@@ -42,17 +42,22 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
     """The whole formation as one gymnasium agent (see the module docstring).
 
     Args:
-        scenario: scenario name; ``**overrides`` as for ``parallel_env``.
+        scenario: scenario name (``**overrides`` as for ``parallel_env``), or a ready
+            :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
         render_mode: ``"rgb_array"`` or ``"human"``.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012 - gymnasium API
 
     def __init__(
-        self, scenario: str = "paper", render_mode: str | None = None, backend: str = "auto", **overrides: Any
+        self,
+        scenario: str | ScenarioConfig = "paper",
+        render_mode: str | None = None,
+        backend: str = "auto",
+        **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.config: ScenarioConfig = resolve_config(scenario, overrides)
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         self.render_mode = render_mode
         self.observation_space = self.core.observation_space(joint=True)

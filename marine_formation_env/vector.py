@@ -44,9 +44,9 @@ from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import read_reset
+from marine_formation_env.frontend import read_reset, resolve_config
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig, make_config
+from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv", "joint_info"]
 
@@ -71,7 +71,8 @@ class MarineFormationVectorEnv(VectorEnv):
 
     Args:
         num_envs: number of formations B.
-        scenario: scenario name; ``**overrides`` as for ``parallel_env``.
+        scenario: scenario name (``**overrides`` as for ``parallel_env``), or a ready
+            :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
         layout: ``"joint"`` (an entry per formation) or ``"agent"`` (per vessel).
         autoreset_mode: :class:`gymnasium.vector.AutoresetMode` ``NEXT_STEP``
             or ``SAME_STEP`` (or their string values).
@@ -87,7 +88,7 @@ class MarineFormationVectorEnv(VectorEnv):
     def __init__(
         self,
         num_envs: int = 1,
-        scenario: str = "paper",
+        scenario: str | ScenarioConfig = "paper",
         layout: str = "joint",
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
@@ -100,7 +101,7 @@ class MarineFormationVectorEnv(VectorEnv):
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {mode!r}")
         check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = make_config(scenario, **overrides)
+        self.config: ScenarioConfig = resolve_config(scenario, overrides)
         self.core = FormationCore(self.config, num_envs=num_envs, backend=backend)
         self.num_formations = self.core.num_envs
         self.n_vessels = self.config.n_vessels

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from baselines.metrics import episode_metrics, summarize
+from baselines.engine import episode_reports
+from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
-from baselines.rollout import run_episode
 from marine_formation_env.env import parallel_env
 from training import run_folder
 from training.learned import ModelPolicy, load_learned_policy
@@ -39,13 +39,9 @@ LOGGED = ("return", "final_coordination_spread", "rms_cross_track", "success")
 
 
 def evaluate_policy_episodes(env: Any, policy: Any, episodes: int, seed: int = EVAL_SEED) -> list[dict[str, Any]]:
-    """Per-episode metrics of ``policy`` on seeds ``seed, seed + 1, …``."""
-    out = []
-    for k in range(episodes):
-        metrics = episode_metrics(run_episode(env, policy, seed=seed + k), env.config)
-        metrics["seed"] = seed + k
-        out.append(metrics)
-    return out
+    """Per-episode metrics of ``policy`` on seeds ``seed, seed + 1, …``, run as one batch (:mod:`baselines.engine`)."""
+    metrics, _ = episode_reports(policy, env.config, [seed + k for k in range(episodes)], backend=env.core.backend)
+    return metrics
 
 
 class ReferenceEvalCallback(BaseCallback):
