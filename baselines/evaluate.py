@@ -10,10 +10,10 @@ Examples::
         --plot results/compare.png
 
     # the reference under the acoustic preset, plain and extrapolating, with 3 s more latency
-    python -m baselines.evaluate --scenario acoustic --policy reference --policy reference:extrapolate \
+    python -m baselines.evaluate --scenario acoustic --policy reference --policy reference:extrapolate \\
         --set channel.latency=3.0 --episodes 5
     # plain LOS against integral LOS in a cross current (the policy steers at the guidance level)
-    python -m baselines.evaluate --scenario current --set action_level=guidance \
+    python -m baselines.evaluate --scenario current --set action_level=guidance \\
         --policy reference --policy reference:ilos=1.0
 
 ``--policy`` repeats: ``reference``, ``random``, or a model saved by

@@ -9,7 +9,7 @@ observation only (never the global state):
 * at ``speed``: the action that commands ``u_cj`` (the env's LOS path
   follower does the rest);
 * at ``guidance``: ``(u_cj, ψ_LOS,j)`` with ψ_LOS from (12);
-* at ``force``: the full surge (11) and yaw (12)-(14) laws, SPEC §3
+* at ``force``: the full surge (11) and yaw (12)-(14) laws, docs/model.md §3
   corrected (or as printed when the env has ``paper_as_printed=True``), held
   over the control period.
 

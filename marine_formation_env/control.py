@@ -1,4 +1,4 @@
-"""The paper's controllers (Sections III-IV), batched, with the SPEC §3 corrections.
+"""The paper's controllers (Sections III-IV), batched, with the docs/model.md §3 corrections.
 
 Every function works element-wise on arrays of any (matching) shape, so the
 same code serves the built-in inner loops of the environment (evaluated at
@@ -6,7 +6,7 @@ every RK4 stage, shapes ``(B, N)``) and the reference policy (evaluated once
 per control period on per-agent observations).
 
 Two equations of the printed paper contradict the paper's own error dynamics
-and are corrected here (SPEC §3); ``as_printed=True`` runs them as printed so
+and are corrected here (docs/model.md §3); ``as_printed=True`` runs them as printed so
 the difference can be shown:
 
 * Surge law (11) lacks the damping compensation ``(d11/m11)·u_c``; as printed,
@@ -110,7 +110,7 @@ def surge_law(
     k_u: float,
     as_printed: bool = False,
 ) -> np.ndarray:
-    """Surge acceleration input τ_u [m/s²] of (11), corrected (SPEC §3).
+    """Surge acceleration input τ_u [m/s²] of (11), corrected (docs/model.md §3).
 
     ``τ_u = −(m22·v + m23·r)·r/m11 + (d11/m11)·u_c + u̇_c − k_u·(u − u_c)``
     gives ``ũ̇ = −(k_u + d11/m11)·ũ``. With ``as_printed=True`` the
@@ -153,7 +153,7 @@ def los_yaw_reference(
     as_printed: bool = False,
     acc: Accelerations | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Desired yaw rate (14), corrected, and its derivative (SPEC §3).
+    """Desired yaw rate (14), corrected, and its derivative (docs/model.md §3).
 
     ::
 

@@ -11,7 +11,7 @@ It holds no random generator: initial states are sampled from a generator the
 caller passes in (:meth:`FormationCore.sample_initial_state`). Every front end
 (PettingZoo env, gymnasium views, vector env) is a thin view of this class.
 
-Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, SPEC §7)::
+Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, docs/model.md §7)::
 
     own   0 e_j = y_j − D_yj                 [m]
           1 ψ_j wrapped to [−π, π)           [rad]

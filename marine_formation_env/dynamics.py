@@ -1,4 +1,4 @@
-"""The vessel ODE of SPEC §1 (paper eqs. 1-4), batched, and its RK4 integrator.
+"""The vessel ODE of docs/model.md §1 (paper eqs. 1-4), batched, and its RK4 integrator.
 
 State arrays have the columns ``x, y, psi, u, v, r`` in the last axis and any
 number of leading batch axes, typically ``(B, N, 6)`` for B formations of N
@@ -53,7 +53,7 @@ def accelerations(
     """Unforced body accelerations of eq. (4).
 
     Returns ``(a_u, v_dot, a_r)`` such that ``u̇ = a_u + τ_u``, ``v̇ = v_dot``
-    and ``ṙ = a_r + τ_r`` (SPEC §1)::
+    and ``ṙ = a_r + τ_r`` (docs/model.md §1)::
 
         a_u   = [(m22·v + m23·r)·r − d11·u] / m11
         f2    = −m11·u·r − d22·v − d23·r

@@ -31,7 +31,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     others: vessel ``j`` receives ``(x_i, ẋ_i)`` only from ``i ∈ A_j``. Agents
     are ``vessel_0 … vessel_{n−1}``; all share one observation and one action
     space (parameter sharing). The default scenario ``paper`` is the paper's
-    Section V (SPEC §5).
+    Section V (docs/model.md §5).
 
     ## Action Space
 
@@ -98,7 +98,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     defaults of ``max_speed`` and ``max_yaw_rate`` (39.6 = 2√2·14).
 
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
-    ``(x_i, ẋ_i)`` (SPEC §3), given relative to ``j``. ``state()`` returns the
+    ``(x_i, ẋ_i)`` (docs/model.md §3), given relative to ``j``. ``state()`` returns the
     global state ``(n·6 + 1,)``: every vessel's ``x, y, ψ (wrapped), u, v, r``
     followed by the time [s], for centralized critics.
 
@@ -142,7 +142,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ## Starting State
 
     The scenario's nominal state plus uniform noise of half-widths
-    ``init_noise`` (x, y [m], ψ [rad], u [m/s]); ``paper``: exactly SPEC §5,
+    ``init_noise`` (x, y [m], ψ [rad], u [m/s]); ``paper``: exactly docs/model.md §5,
     ``(x, y, ψ, u, v, r)`` = (−50, 20, 0, 3, 0, 0), (−60, 30, 0.3, 3, 0, 0),
     (−120, −10, −0.2, 3, 0, 0). ``reset(options={"initial_state": (n, 6)})``
     sets it exactly. A start that would end the episode before the first
@@ -187,7 +187,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `u_d`              | 5 m/s                | number or `SpeedProfile` (must satisfy (19))               |
     | `u_min`, `u_max`   | 3, 7 m/s             | controllability band                                       |
     | `gains`            | paper's              | `Gains(k_u, k_psi, k_r, delta, a)`                         |
-    | `paper_as_printed` | False                | run (11) and (14) as printed (SPEC §3)                     |
+    | `paper_as_printed` | False                | run (11) and (14) as printed (docs/model.md §3)                     |
     | `safety_distance`  | 5 m (`paper`: 0)     | collision distance (0 disables the check)                  |
     | `channel`          | ideal links          | `ChannelConfig` or mapping (previous section)            |
     | `topology_schedule`| none                 | ((dwell s, graph), …) repeated; replaces `topology`       |

@@ -1,4 +1,4 @@
-"""Directed communication graphs (paper Section IV, SPEC §4).
+"""Directed communication graphs (paper Section IV, docs/model.md §4).
 
 Convention of the paper: if vessel ``i`` transmits to vessel ``j``, the graph
 has the edge ``(j, i)``, i.e. edges point *against* the flow of information.
@@ -15,7 +15,7 @@ Presets (:func:`make_graph`), for any ``n ≥ 2`` unless noted; one-way links
 unless the name ends in ``_bidirectional``:
 
 =========================  =====================================================
-``paper``                  n = 3: 1 → 0, 1 → 2, 0 → 2 (SPEC §5; vessel 1 leads)
+``paper``                  n = 3: 1 → 0, 1 → 2, 0 → 2 (docs/model.md §5; vessel 1 leads)
 ``chain``                  0 → 1 → 2 → … → n−1 (vessel 0 leads)
 ``ring``                   0 → 1 → … → n−1 → 0 (every node globally reachable)
 ``leader_follower``        0 → every other vessel (alias ``star``)

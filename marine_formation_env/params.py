@@ -1,7 +1,7 @@
 """Vessel parameter sets and controller gains.
 
 Every number in this module carries its source. The model is the 3-DOF
-surge/sway/yaw model of the paper (eqs. 1-4, SPEC §1):
+surge/sway/yaw model of the paper (eqs. 1-4, docs/model.md §1):
 
     M ν̇ + C(ν) ν + D ν = B u,     M⁻¹ B u = [τ_u, 0, τ_r]ᵀ
 
@@ -11,8 +11,8 @@ kg·m², kg/s, kg·m/s, kg·m²/s).
 
 The paper gives no numbers; the default set :data:`SUPPLY` is the supply
 vessel of Fossen, Sagatun & Sørensen (1996), built from its published
-nondimensional (bis-system) data exactly as SPEC §2 describes, so the table in
-SPEC §2 is *computed* here and checked by the tests rather than typed in.
+nondimensional (bis-system) data exactly as docs/model.md §2 describes, so the table in
+docs/model.md §2 is *computed* here and checked by the tests rather than typed in.
 """
 
 from __future__ import annotations
@@ -90,11 +90,11 @@ class VesselParams:
         return self.m22 * self.m33 - self.m23**2
 
     def sway_coupling(self, u: float | np.ndarray) -> float | np.ndarray:
-        """X(u) [m/s]: the yaw-rate-to-sway gain in ``v̇ = X(u)·r + Y(u)·v`` (SPEC §1)."""
+        """X(u) [m/s]: the yaw-rate-to-sway gain in ``v̇ = X(u)·r + Y(u)·v`` (docs/model.md §1)."""
         return ((self.m23**2 - self.m11 * self.m33) * u + self.m23 * self.d33 - self.m33 * self.d23) / self.lam
 
     def sway_damping(self, u: float | np.ndarray) -> float | np.ndarray:
-        """Y(u) [1/s]: the sway self-coupling in ``v̇ = X(u)·r + Y(u)·v`` (SPEC §1).
+        """Y(u) [1/s]: the sway self-coupling in ``v̇ = X(u)·r + Y(u)·v`` (docs/model.md §1).
 
         ``Y(u) < 0`` is the paper's assumption 5 (sway is damped).
         """
@@ -158,7 +158,7 @@ class VesselParams:
         ``T⁻¹ = diag(1, 1, L)`` (Fossen's bis system), then the body origin is
         moved forward by ``x_p = (l·m23 − m33)/(l·m22 − m23)`` (``l`` =
         ``rudder_x``, the lever arm of the yaw actuator) so that the yaw
-        actuator does not accelerate sway (SPEC §2).
+        actuator does not accelerate sway (docs/model.md §2).
         """
         t_inv = np.diag([1.0, 1.0, length])
         m_mat = mass * t_inv @ np.asarray(m_nd, dtype=float) @ t_inv
@@ -187,14 +187,14 @@ class VesselParams:
 #: "Identification of dynamically positioned ships", Control Engineering
 #: Practice 4(3), as published in Fossen's MSS toolbox (``supply.m``) and Python
 #: Vehicle Simulator (``supply.py``). Origin moved to x_p = 7.929 m ahead of the
-#: original so that a rudder at l = −L/2 does not accelerate sway (SPEC §2).
+#: original so that a rudder at l = −L/2 does not accelerate sway (docs/model.md §2).
 #: The beam (18.8 m) is only used for drawing.
 SUPPLY = VesselParams.from_nondimensional(
     name="supply",
     source=(
         "Fossen, Sagatun & Sorensen (1996), Control Engineering Practice 4(3); "
         "MSS toolbox supply.m / Python Vehicle Simulator supply.py; origin shifted "
-        "to x_p = (l*m23 - m33)/(l*m22 - m23), l = -L/2 (SPEC §2)"
+        "to x_p = (l*m23 - m33)/(l*m22 - m23), l = -L/2 (docs/model.md §2)"
     ),
     length=76.2,
     mass=6.0e6,

@@ -49,13 +49,13 @@ __all__ = [
     "make_config",
 ]
 
-#: What a policy controls (SPEC §6), with the default control period dt [s].
+#: What a policy controls (docs/model.md §6), with the default control period dt [s].
 ACTION_LEVELS: dict[str, float] = {"force": 0.1, "guidance": 0.5, "speed": 0.5}
 
 #: Largest RK4 step [s] used when ``substeps`` is not given: ``substeps = ceil(dt/0.1)``.
 MAX_RK4_STEP = 0.1
 
-#: SPEC §5 initial state (columns x [m], y [m], ψ [rad], u [m/s], v [m/s], r [rad/s]).
+#: docs/model.md §5 initial state (columns x [m], y [m], ψ [rad], u [m/s], v [m/s], r [rad/s]).
 PAPER_INITIAL_STATE = np.array(
     [
         [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
@@ -221,11 +221,11 @@ class ScenarioConfig:
         gains: controller gains and consensus saturation ``a``.
         u_d: desired formation speed [m/s] (number or :class:`SpeedProfile`).
         u_min, u_max: the controllability band (U_min, U_max) [m/s].
-        action_level: ``force``, ``guidance`` or ``speed`` (SPEC §6).
+        action_level: ``force``, ``guidance`` or ``speed`` (docs/model.md §6).
         dt: control period [s]; default depends on the level (:data:`ACTION_LEVELS`).
         substeps: RK4 steps per control period; default ``ceil(dt / 0.1)``.
         horizon: episode length [s]; truncation after ``round(horizon/dt)`` steps.
-        paper_as_printed: run (11) and (14) exactly as printed (SPEC §3).
+        paper_as_printed: run (11) and (14) exactly as printed (docs/model.md §3).
         initial_state: nominal ``(n, 6)`` initial state, or None for the
             formation slots at speed u_d(0) heading along the path.
         init_noise: uniform noise added to the nominal initial state at reset.
@@ -667,14 +667,14 @@ def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
-#: The paper's scenario (SPEC §5).
+#: The paper's scenario (docs/model.md §5).
 _PAPER: dict[str, Any] = {
     "name": "paper",
     "n_vessels": 3,
     "formation": "paper",
     "topology": "paper",
     "initial_state": PAPER_INITIAL_STATE,
-    # The SPEC §5 initial state makes vessel_0 and vessel_1 cross paths: under
+    # The docs/model.md §5 initial state makes vessel_0 and vessel_1 cross paths: under
     # the paper's controller they pass 0.5-0.7 m apart (as point masses). The
     # paper does not model collisions, so the check is off in this scenario.
     "safety_distance": 0.0,

@@ -1,10 +1,10 @@
-"""Tests of :mod:`marine_formation_env.control` against SPEC §3 and the paper's error dynamics.
+"""Tests of :mod:`marine_formation_env.control` against docs/model.md §3 and the paper's error dynamics.
 
 The plant in the closed-loop tests is an independent implementation of the
 paper's model (M, C(ν), D as matrices, ``np.linalg.solve``), not the package's
 ``vessel_rhs``; the truths are closed-form solutions of the error dynamics
 (15)-(16), ``scipy.linalg.expm``, finite differences along ``solve_ivp``
-trajectories and the numbers given in SPEC §3.
+trajectories and the numbers given in docs/model.md §3.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from marine_formation_env.control import (
 )
 from marine_formation_env.params import SUPPLY, Gains
 
-GAINS = Gains()  # paper values (SPEC §5)
+GAINS = Gains()  # paper values (docs/model.md §5)
 
 
 def _integrate(f, s0: np.ndarray, t_end: float, **kw) -> np.ndarray:
@@ -52,7 +52,7 @@ def _integrate(f, s0: np.ndarray, t_end: float, **kw) -> np.ndarray:
     frac=st.floats(min_value=0.0, max_value=1.0),
 )
 def test_consensus_speed_stays_inside_speed_band(s: float, a: float, u_min: float, width: float, frac: float) -> None:
-    """Assumption (19) ⇒ u_c ∈ (U_min, U_max) for every s (SPEC §3)."""
+    """Assumption (19) ⇒ u_c ∈ (U_min, U_max) for every s (docs/model.md §3)."""
     u_max = u_min + 2.0 * a + width
     u_d = u_min + a + frac * width  # u_d ∈ [U_min + a, U_max − a]
     g = float(saturation(s, a))
@@ -110,7 +110,7 @@ def test_consensus_rate_is_the_time_derivative(s0: float, s_dot: float, u_d0: fl
 
 # ------------------------------------------------------------- (c) surge law
 def test_corrected_surge_law_gives_exponential_tracking_at_zero_sway_yaw() -> None:
-    """SPEC §3: ũ̇ = −(k_u + d11/m11)·ũ at v = r = 0, with a constant u_c."""
+    """docs/model.md §3: ũ̇ = −(k_u + d11/m11)·ũ at v = r = 0, with a constant u_c."""
     p, k_u, u_c = SUPPLY, GAINS.k_u, 5.0
 
     def f(t: float, s: np.ndarray) -> np.ndarray:
@@ -148,9 +148,9 @@ def test_corrected_surge_law_with_turning_and_time_varying_command() -> None:
 
 
 def test_printed_surge_law_settles_below_command() -> None:
-    """SPEC §3: as printed, u → k_u·u_c/(k_u + d11/m11) = 4.889 m/s at u_c = 5 m/s."""
+    """docs/model.md §3: as printed, u → k_u·u_c/(k_u + d11/m11) = 4.889 m/s at u_c = 5 m/s."""
     p, k_u, u_c = SUPPLY, GAINS.k_u, 5.0
-    d_over_m = 7.7071e4 / 6.7644e6  # SPEC §2 table
+    d_over_m = 7.7071e4 / 6.7644e6  # docs/model.md §2 table
     u_ss = k_u * u_c / (k_u + d_over_m)
     assert u_ss == pytest.approx(4.889, abs=5e-4)
 
@@ -169,7 +169,7 @@ def test_printed_surge_law_settles_below_command() -> None:
 
 # ---------------------------------------------------------------- (d) yaw law
 def test_yaw_law_gives_first_order_yaw_rate_error() -> None:
-    """ṙ = a_r + τ_r = ṙ_d − k_r·(r − r_d) exactly, for random states (SPEC §3, eq. 13)."""
+    """ṙ = a_r + τ_r = ṙ_d − k_r·(r − r_d) exactly, for random states (docs/model.md §3, eq. 13)."""
     rng = np.random.default_rng(10)
     for _ in range(200):
         s = np.array([0.0, 0.0, rng.uniform(-3, 3), rng.uniform(-1, 9), rng.uniform(-2, 2), rng.uniform(-0.2, 0.2)])
@@ -287,7 +287,7 @@ def test_corrected_path_following_gives_papers_error_dynamics() -> None:
         tau_u, tau_r = path_following_inputs(p, g, s[1] - D_Y, s[2], s[3], s[4], s[5], U_C, 0.0)
         return model_rhs(p, s, float(tau_u), float(tau_r))
 
-    # vessel_1 of the paper scenario (SPEC §5) relative to a path at D_Y
+    # vessel_1 of the paper scenario (docs/model.md §5) relative to a path at D_Y
     s0 = np.array([-60.0, D_Y + 30.0, 0.3, 3.0, 0.0, 0.0])
     t_eval = np.linspace(0.0, 12.0, 13)
     sol = _integrate(f, s0, 12.0, t_eval=t_eval)
@@ -305,7 +305,7 @@ def test_corrected_path_following_gives_papers_error_dynamics() -> None:
 
 
 def test_printed_yaw_reference_violates_16() -> None:
-    """SPEC §3: with the printed sign, (16) does not hold along the closed loop."""
+    """docs/model.md §3: with the printed sign, (16) does not hold along the closed loop."""
     p, g = SUPPLY, GAINS
 
     def f(t: float, s: np.ndarray) -> np.ndarray:

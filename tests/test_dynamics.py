@@ -1,4 +1,4 @@
-"""Tests of :mod:`marine_formation_env.dynamics` (paper eqs. 1-4, SPEC §1).
+"""Tests of :mod:`marine_formation_env.dynamics` (paper eqs. 1-4, docs/model.md §1).
 
 Independent truths: the model written as matrices straight from the paper
 (``M ν̇ + C(ν)ν + Dν = M[τ_u, 0, τ_r]ᵀ`` solved with ``np.linalg.solve``),

@@ -1,6 +1,6 @@
 """The PettingZoo ParallelEnv: API conformance, spaces, reset, episode end, rewards, masking.
 
-Expected values come from PettingZoo's own test suite, SPEC §3-§7, the env and
+Expected values come from PettingZoo's own test suite, docs/model.md §3–§7, the env and
 RewardConfig docstrings, and quantities computed here by hand from the state
 (ẋ = u cos ψ − v sin ψ, e = y − D_y, …), never by calling the package's own
 observation code.
@@ -22,7 +22,7 @@ LEVELS = ("force", "guidance", "speed")
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
 DT_DEFAULT = {"force": 0.1, "guidance": 0.5, "speed": 0.5}
 
-# SPEC §5, typed in by hand (columns x, y, psi, u, v, r; offsets D_x, D_y).
+# docs/model.md §5, typed in by hand (columns x, y, psi, u, v, r; offsets D_x, D_y).
 PAPER_X0 = np.array(
     [
         [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
@@ -31,7 +31,7 @@ PAPER_X0 = np.array(
     ]
 )
 PAPER_D = np.array([[-100.0, 50.0], [0.0, 0.0], [-100.0, -50.0]])
-# SPEC §5 graph: vessel_1 → vessel_0, vessel_1 → vessel_2, vessel_0 → vessel_2.
+# docs/model.md §5 graph: vessel_1 → vessel_0, vessel_1 → vessel_2, vessel_0 → vessel_2.
 PAPER_NEIGHBOURS = {0: {1}, 1: set(), 2: {0, 1}}
 # RewardConfig defaults (its docstring / the env docstring): Σ weights = 1 + 0.25 + 1 + 0.5 + 0.
 DEFAULT_TOTAL_WEIGHT = 2.75
@@ -49,7 +49,7 @@ def wrap(angle: float) -> float:
 
 
 def x_dot(row: np.ndarray) -> float:
-    """ẋ = u cos ψ − v sin ψ (SPEC §1)."""
+    """ẋ = u cos ψ − v sin ψ (docs/model.md §1)."""
     return row[3] * math.cos(row[2]) - row[4] * math.sin(row[2])
 
 
@@ -149,7 +149,7 @@ def test_agents_and_spaces(level):
     assert act.shape == (ACTION_DIM[level],)
     assert act.dtype == np.float32
     assert np.all(act.low == -1.0) and np.all(act.high == 1.0)
-    # SPEC §7 / core docstring: 7 own entries + 4 per other vessel
+    # docs/model.md §7 / core docstring: 7 own entries + 4 per other vessel
     assert first_obs_space.shape == (7 + 4 * 2,)
     assert env.state_space.shape == (3 * 6 + 1,)
 
@@ -289,7 +289,7 @@ def test_collision_terminates_all_with_terminal_penalty(reward):
 
 def test_no_collision_when_far_apart():
     env = marine_formation_env.parallel_env("paper", safety_distance=5.0, horizon=5.0)
-    env.reset()  # SPEC §5 state: vessels ≥ 14 m apart at the start
+    env.reset()  # docs/model.md §5 state: vessels ≥ 14 m apart at the start
     _, _, terminations, _, infos = env.step({a: np.zeros(1, np.float32) for a in env.agents})
     assert not any(terminations.values())
     assert not any(info["collision"] for info in infos.values())
@@ -415,7 +415,7 @@ def test_paper_graph_masking():
                 # a neighbour's x alone reaches j …
                 only_x = first_obs(env, _perturbed(x0, i, (0,)))[agent]
                 assert not np.array_equal(only_x, base[agent])
-                # … but its y and r are not transmitted (SPEC §3: only x_i and ẋ_i)
+                # … but its y and r are not transmitted (docs/model.md §3: only x_i and ẋ_i)
                 not_sent = first_obs(env, _perturbed(x0, i, (1, 5)))[agent]
                 assert np.array_equal(not_sent, base[agent])
             else:

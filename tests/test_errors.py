@@ -104,7 +104,7 @@ def test_non_positive_delta_via_override():
 
 
 def test_delta_below_sway_bound():
-    # SPEC §1: Proposition 1 needs Δ > C_v·U_max = 37.7 m for `supply` on [3, 7] m/s
+    # docs/model.md §1: Proposition 1 needs Δ > C_v·U_max = 37.7 m for `supply` on [3, 7] m/s
     with pytest.raises(ConfigError, match=r"30\.0.*37\.(7|69)"):
         make(gains={"delta": 30.0})
     make(gains={"delta": 40.0})  # above the bound: accepted

@@ -1,4 +1,4 @@
-"""Tests of :mod:`marine_formation_env.graph` (paper Section IV, SPEC §4).
+"""Tests of :mod:`marine_formation_env.graph` (paper Section IV, docs/model.md §4).
 
 Convention: vessel i transmits to vessel j ⇔ edge (j, i) ⇔ A[j, i] = 1 ⇔ i ∈ A_j.
 Node k is globally reachable if it can be reached from every node along edges.
@@ -33,7 +33,7 @@ def independent_globally_reachable(adj: np.ndarray) -> list[int]:
 # --------------------------------------------------------- hand-made answers
 def test_paper_preset() -> None:
     g = make_graph("paper", 3)
-    # SPEC §5: links 1 → 0, 1 → 2, 0 → 2, i.e. edges (0,1), (2,1), (2,0)
+    # docs/model.md §5: links 1 → 0, 1 → 2, 0 → 2, i.e. edges (0,1), (2,1), (2,0)
     assert sorted(g.edges) == [(0, 1), (2, 0), (2, 1)]
     assert g.links == [(0, 2), (1, 0), (1, 2)]
     assert g.neighbors(0) == [1] and g.neighbors(1) == [] and g.neighbors(2) == [0, 1]

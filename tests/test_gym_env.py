@@ -1,4 +1,4 @@
-"""The centralized gymnasium view ``gymnasium.make("MarineFormation-v0")`` (SPEC §7).
+"""The centralized gymnasium view ``gymnasium.make("MarineFormation-v0")`` (docs/model.md §7).
 
 Truth comes from outside the view: gymnasium's and Stable-Baselines3's own env
 checkers (which must pass without a single warning), gymnasium's and
@@ -28,7 +28,7 @@ LEVELS = ("force", "guidance", "speed")
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
 OWN, SLOT = 7, 4
 
-# SPEC §5, typed in by hand (columns x, y, psi, u, v, r; offsets D_x, D_y).
+# docs/model.md §5, typed in by hand (columns x, y, psi, u, v, r; offsets D_x, D_y).
 PAPER_X0 = np.array(
     [
         [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
@@ -40,7 +40,7 @@ PAPER_D = np.array([[-100.0, 50.0], [0.0, 0.0], [-100.0, -50.0]])
 
 
 def obs_dim(n: int) -> int:
-    """SPEC §7 / env docstring: 7 own entries plus a 4-entry slot per other vessel."""
+    """docs/model.md §7 / env docstring: 7 own entries plus a 4-entry slot per other vessel."""
     return OWN + SLOT * (n - 1)
 
 

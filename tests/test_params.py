@@ -1,8 +1,8 @@
-"""Tests of :mod:`marine_formation_env.params` against SPEC §1-§2 and first principles.
+"""Tests of :mod:`marine_formation_env.params` against docs/model.md §1–§2 and first principles.
 
 Independent truths used here:
 
-* the SPEC §2 table of SI values (typed in below, as published in the SPEC);
+* the docs/model.md §2 table of SI values (typed in below, as published there);
 * the origin shift derived from rigid-body kinematics: moving the body origin
   forward by ``x_p`` gives ``ν_old = H ν_new`` with ``H = [[1,0,0],[0,1,−x_p],[0,0,1]]``,
   hence ``M' = Hᵀ M H`` and ``D' = Hᵀ D H`` (congruence, not the code's
@@ -22,8 +22,8 @@ import pytest
 from marine_formation_env.params import SUPPLY, VESSELS, Gains, ParameterError, VesselParams, get_vessel
 
 # --------------------------------------------------------------------------- data
-# SPEC §2 table (SI units).
-SPEC_TABLE = {
+# docs/model.md §2 table (SI units).
+MODEL_TABLE = {
     "m11": 6.7644e6,
     "m22": 1.13412e7,
     "m23": -1.2394e8,
@@ -35,7 +35,7 @@ SPEC_TABLE = {
     "d33": 4.2248e8,
 }
 
-# SPEC §2 raw data of the supply vessel (Fossen, Sagatun & Sørensen 1996).
+# docs/model.md §2 raw data of the supply vessel (Fossen, Sagatun & Sørensen 1996).
 L_SUPPLY = 76.2
 MASS = 6.0e6
 GRAVITY = 9.81
@@ -45,7 +45,7 @@ D_ND = np.array([[0.0358, 0.0, 0.0], [0.0, 0.1183, -0.0124], [0.0, -0.0041, 0.03
 # CyberShip II (Skjetne, Fossen & Kokotović 2005, Automatica 41) with linear
 # damping only: m11 = m − X_u̇, m22 = m − Y_v̇, m23 = m·x_g − Y_ṙ, m33 = I_z − N_ṙ,
 # d11 = −X_u, d22 = −Y_v, d23 = −Y_r, d32 = −N_v, d33 = −N_r.
-# SPEC §2: it has Y > 0 at the Froude-equivalent speed, so it must be rejected.
+# docs/model.md §2: it has Y > 0 at the Froude-equivalent speed, so it must be rejected.
 CYBERSHIP2_LINEAR = dict(
     m11=25.8,
     m22=33.8,
@@ -61,11 +61,11 @@ L_CS2 = 1.255
 
 
 def _fields(p: VesselParams) -> dict[str, float]:
-    return {k: getattr(p, k) for k in SPEC_TABLE}
+    return {k: getattr(p, k) for k in MODEL_TABLE}
 
 
 def _original_matrices() -> tuple[np.ndarray, np.ndarray]:
-    """M and D of the supply vessel before the origin shift (bis system, SPEC §2)."""
+    """M and D of the supply vessel before the origin shift (bis system, docs/model.md §2)."""
     t_inv = np.diag([1.0, 1.0, L_SUPPLY])
     m_mat = MASS * t_inv @ M_ND @ t_inv
     d_mat = MASS * math.sqrt(GRAVITY / L_SUPPLY) * t_inv @ D_ND @ t_inv
@@ -90,11 +90,11 @@ def _sway_yaw_system(f: dict[str, float], u: float) -> np.ndarray:
     return -np.linalg.solve(m_sub, n_mat)
 
 
-# --------------------------------------------------------------------- SPEC table
-@pytest.mark.parametrize("key", list(SPEC_TABLE))
+# --------------------------------------------------------------------- docs/model.md table
+@pytest.mark.parametrize("key", list(MODEL_TABLE))
 def test_supply_matches_spec_table(key: str) -> None:
     # The table has at least 5 significant digits; require agreement to 4 (rel 5e-5).
-    assert getattr(SUPPLY, key) == pytest.approx(SPEC_TABLE[key], rel=5e-5)
+    assert getattr(SUPPLY, key) == pytest.approx(MODEL_TABLE[key], rel=5e-5)
 
 
 def test_supply_is_registered_and_has_a_source() -> None:
@@ -103,11 +103,11 @@ def test_supply_is_registered_and_has_a_source() -> None:
     assert get_vessel(SUPPLY) is SUPPLY
     assert "Fossen" in SUPPLY.source
     assert SUPPLY.length == pytest.approx(L_SUPPLY)
-    np.testing.assert_allclose(SUPPLY.as_array(), [SPEC_TABLE[k] for k in SPEC_TABLE], rtol=5e-5)
+    np.testing.assert_allclose(SUPPLY.as_array(), [MODEL_TABLE[k] for k in MODEL_TABLE], rtol=5e-5)
 
 
 def test_supply_equals_congruence_transform_of_original_matrices() -> None:
-    """M' = HᵀMH, D' = HᵀDH with the SPEC §2 shift x_p (independent of the code's formulas)."""
+    """M' = HᵀMH, D' = HᵀDH with the docs/model.md §2 shift x_p (independent of the code's formulas)."""
     m_mat, d_mat = _original_matrices()
     lever = -L_SUPPLY / 2.0
     m22, m23, m33 = m_mat[1, 1], m_mat[1, 2], m_mat[2, 2]
@@ -200,7 +200,7 @@ def test_sway_ratio_bound_is_37_7_m() -> None:
 
 
 def test_steady_turn_sway_equals_ratio_bound_times_yaw_rate() -> None:
-    """Hold u and r fixed: v → −X/Y·r (SPEC §1); |v|/|r| at U_max is the bound."""
+    """Hold u and r fixed: v → −X/Y·r (docs/model.md §1); |v|/|r| at U_max is the bound."""
     f = _fields(SUPPLY)
     a = _sway_yaw_system(f, 7.0)
     r = 0.01
@@ -273,7 +273,7 @@ def test_rejects_singular_mass() -> None:
         _toy(m22=1.0, m33=1.0, m23=1.0)  # Λ = 0 exactly
 
 
-@pytest.mark.parametrize("key", list(SPEC_TABLE))
+@pytest.mark.parametrize("key", list(MODEL_TABLE))
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
 def test_rejects_non_finite_entries(key: str, value: float) -> None:
     with pytest.raises(ParameterError, match=key):
@@ -294,7 +294,7 @@ def test_parameter_error_is_value_error() -> None:
 # ------------------------------------------------------------------------ Gains
 def test_default_gains_are_the_papers() -> None:
     g = Gains()
-    assert (g.k_u, g.k_psi, g.k_r, g.delta, g.a) == (0.5, 0.5, 5.0, 70.0, 1.0)  # SPEC §5
+    assert (g.k_u, g.k_psi, g.k_r, g.delta, g.a) == (0.5, 0.5, 5.0, 70.0, 1.0)  # docs/model.md §5
 
 
 @pytest.mark.parametrize("value", [0.0, -70.0, math.nan, math.inf])

@@ -1,13 +1,13 @@
 """The reference policy (the paper's controller) in closed loop with the env.
 
 Independent truths used here:
-* the acceptance criteria of the issue and SPEC §5's numbers for the paper
+* the acceptance criteria of the issue and docs/model.md §5's numbers for the paper
   scenario;
 * a continuous-time closed loop integrated with scipy's DOP853 (rtol 1e-9):
   the vessel ODE and the paper's controllers with the *continuous* consensus
   law (20) and its exact derivative u̇_c fed to (11), instead of the env's
   sampled, held commands and its own RK4;
-* SPEC §3's closed form of the steady surge speed under the printed law (11);
+* docs/model.md §3's closed form of the steady surge speed under the printed law (11);
 * PettingZoo-level facts: the policy gets the observation dict only.
 """
 
@@ -26,7 +26,7 @@ from marine_formation_env.dynamics import vessel_rhs
 
 LEVELS = ("force", "guidance", "speed")
 
-# SPEC §5, typed in by hand.
+# docs/model.md §5, typed in by hand.
 PAPER_X0 = np.array(
     [
         [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
@@ -35,7 +35,7 @@ PAPER_X0 = np.array(
     ]
 )
 PAPER_D = np.array([[-100.0, 50.0], [0.0, 0.0], [-100.0, -50.0]])
-PAPER_NEIGHBOURS = {0: [1], 1: [], 2: [0, 1]}  # A_j (SPEC §5)
+PAPER_NEIGHBOURS = {0: [1], 1: [], 2: [0, 1]}  # A_j (docs/model.md §5)
 U_D, U_MIN, U_MAX, A_SAT = 5.0, 3.0, 7.0, 1.0
 
 
@@ -83,7 +83,7 @@ def paper_runs():
 
 
 def _continuous_closed_loop_rhs(params, gains, neighbours, offsets, u_d=U_D):
-    """Vessel ODE + (11)-(14) + continuous consensus (20) with exact u̇_c (SPEC §3)."""
+    """Vessel ODE + (11)-(14) + continuous consensus (20) with exact u̇_c (docs/model.md §3)."""
     n = len(offsets)
 
     def rhs(_t: float, y: np.ndarray) -> np.ndarray:
@@ -258,7 +258,7 @@ def test_paper_as_printed_settles_below_desired_speed(paper_runs):
     obs, _ = env.reset()
     while env.agents:
         obs, *_ = env.step(policy.act(obs))
-    # SPEC §3: u = k_u·u_d/(k_u + d11/m11) with the SPEC §2 table values
+    # docs/model.md §3: u = k_u·u_d/(k_u + d11/m11) with the docs/model.md §2 table values
     u_printed = 0.5 * U_D / (0.5 + 7.7071e4 / 6.7644e6)
     assert u_printed == pytest.approx(4.889, abs=5e-4)
     np.testing.assert_allclose(env.vessel_states[:, 3], u_printed, atol=1e-3)

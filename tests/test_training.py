@@ -403,10 +403,6 @@ def test_shipped_config_builds_its_algorithm_without_warnings(path):
     assert [str(w.message) for w in caught] == []
 
 
-def test_configs_folder_is_not_empty():
-    assert {p.name for p in CONFIGS} >= {"paper_speed_ppo.yaml"}
-
-
 # =========================================================================== (c) end-to-end smoke run
 
 SMOKE_ARGS = [
