@@ -223,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override")
-    parser.add_argument("--paper-initial-state", action="store_true", help="start from the paper scenario's initial state")
+    parser.add_argument("--paper-initial-state", action="store_true", help="start from the paper's initial state")
     parser.add_argument("--out", type=Path, default=Path("results/sweep"), help="output prefix (.json/.md/.png)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     args = parser.parse_args(argv)
