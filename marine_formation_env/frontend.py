@@ -149,7 +149,9 @@ def read_reset(
     """Check every ``reset`` argument before anything changes, the same way for every front end.
 
     Args:
-        seed, options: as passed to ``reset``.
+        config: the front end's configuration.
+        seed: as passed to ``reset``.
+        options: as passed to ``reset``.
         num_formations: None for a single-formation front end (one seed, an
             ``(n, 6)`` state); B for the vector env (``seed + b`` or a list of
             B seeds, an ``(n, 6)`` or ``(B, n, 6)`` state).

@@ -1,0 +1,50 @@
+"""The documentation a user has: what it promises about itself.
+
+CI runs ``.ci/run``, which must be the README's test command; the README stays
+short; no user-facing file points at material users do not have; every page
+of ``docs/`` is on the site.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("marine_formation_env", "baselines", "training")
+CODE = sorted(p for package in PACKAGES for p in (ROOT / package).rglob("*.py"))
+USER_FACING = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *CODE]
+
+
+def readme_command(heading: str) -> str:
+    text = (ROOT / "README.md").read_text()
+    after = text[text.index(heading) :]
+    return re.search(r"```bash\n(.+?)\n```", after, re.S).group(1).strip()
+
+
+def test_ci_runs_exactly_the_readme_test_command():
+    command = readme_command("Run the tests")
+    assert "\n" not in command  # one line
+    script = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line and not line.startswith("#")]
+    assert script[-1] == command
+
+
+def test_readme_is_short():
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 200
+
+
+@pytest.mark.parametrize("path", USER_FACING, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_reference_to_files_users_do_not_have(path):
+    text = path.read_text()
+    assert "../shared" not in text
+    assert not re.search(r"\bSPEC\b", text), "cite the paper's equations or docs/model.md instead"
+
+
+def test_every_docs_page_is_on_the_site():
+    """Every page is in the navigation, except the tables the sweep script writes (excluded from the site)."""
+    config = (ROOT / "mkdocs.yml").read_text()
+    for page in (ROOT / "docs").glob("*.md"):
+        generated = page.name.startswith("sweep_") and "sweep_*.md" in config
+        assert generated or f": {page.name}" in config, page.name
