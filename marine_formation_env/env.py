@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, ClassVar
 
 import numpy as np
@@ -11,7 +10,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
-from marine_formation_env.frontend import read_reset, resolve_config
+from marine_formation_env.frontend import Rendering, one_entry, read_reset, resolve_config, vessel_infos
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig
 
@@ -236,7 +235,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self._action_space = self.core.action_space()
         self.state_space = spaces.Box(-np.inf, np.inf, (n * 6 + 1,), dtype=np.float32)
         self.np_random, self.np_random_seed = seeding.np_random(None)
-        self._renderer: Any = None
+        self._rendering = Rendering(self.config, render_mode)
         self._started = False
 
     # ------------------------------------------------------------------ spaces
@@ -290,8 +289,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self._started = True
         if self.render_mode == "human":
             self.render()
-        idle = reset_output(obs[None], self.config.action_level != "force")
-        return self._per_agent(obs), {agent: self._info(idle, self._index[agent]) for agent in self.agents}
+        return self._per_agent(obs), self._infos(reset_output(obs[None], self.config.action_level != "force"))
 
     def step(
         self, actions: dict[str, Any]
@@ -320,7 +318,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         term, trunc = bool(out.terminated[0]), bool(out.truncated[0])
         terminations = dict.fromkeys(self.agents, term)
         truncations = dict.fromkeys(self.agents, trunc)
-        infos = {agent: self._info(out, self._index[agent]) for agent in self.agents}
+        infos = self._infos(out)
         if term or trunc:
             self.agents = []
         if self.render_mode == "human":
@@ -334,21 +332,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     # ------------------------------------------------------------- rendering
     def render(self) -> np.ndarray | None:
         """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
-        if self.render_mode is None:
-            warnings.warn(
-                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'", stacklevel=2
-            )
-            return None
-        if self._renderer is None:
-            from marine_formation_env.render import FormationRenderer
-
-            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0))
+        return self._rendering.frame(self.core)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._rendering.close()
 
     # --------------------------------------------------------------- helpers
     @property
@@ -387,17 +374,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             batch[0, self._index[agent]] = arr
         return batch
 
-    def _info(self, out: StepOutput, j: int) -> dict[str, Any]:
-        info: dict[str, Any] = {
-            "reward_components": {key: float(value[0, j]) for key, value in out.components.items()},
-            "time": float(self.core.time[0]),
-            "collision": bool(out.collision[0]),
-            "out_of_bounds": bool(out.out_of_bounds[0]),
-        }
-        if out.commanded_speed is not None:
-            info["commanded_speed"] = float(out.commanded_speed[0, j])
-        return info
-
+    def _infos(self, out: StepOutput) -> dict[str, dict[str, Any]]:
+        """``{agent: info}`` in the per-vessel schema (:mod:`marine_formation_env.frontend`)."""
+        stacked = vessel_infos(out, self.core.time)
+        return {agent: one_entry(stacked, (0, self._index[agent])) for agent in self.agents}
 
 def parallel_env(
     scenario: str | ScenarioConfig = "paper", render_mode: str | None = None, **overrides: Any

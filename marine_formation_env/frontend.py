@@ -1,8 +1,25 @@
-"""What every front end does the same way: reading ``reset`` arguments.
+"""What every front end does the same way: ``reset`` arguments, infos and rendering.
 
 The PettingZoo env, the gymnasium view and the vector env accept the same
 ``reset(seed=…, options=…)`` and refuse the same bad input with the same
-message. This module holds those rules once.
+message, report their infos in one schema, and render through one piece of
+code. This module holds those rules once; the front ends only lay them out.
+
+Infos (the same keys from ``reset()``, with zeros, as from ``step()``):
+
+* **per vessel** (ParallelEnv ``infos[agent]``, vector env ``layout="agent"``
+  entries): ``reward_components`` (name → that vessel's term; they sum to its
+  reward), ``time`` [s], ``collision``, ``out_of_bounds`` (the formation's
+  flags), and ``commanded_speed`` u_c [m/s] at the ``speed`` and ``guidance``
+  levels.
+* **per formation** (``gymnasium.make`` info, vector env ``layout="joint"``
+  entries): ``vessel_rewards`` ``(N,)``, ``reward_components`` (name → the mean
+  over the vessels; they sum to the formation's reward, the mean of the
+  vessels'), ``time``, ``collision``, ``out_of_bounds``, and
+  ``commanded_speed`` ``(N,)``.
+
+The vector env stacks these over its entries (arrays with a leading
+``num_envs`` axis); the single-formation views hold plain Python numbers.
 
 Reset options (all optional):
 
@@ -27,17 +44,22 @@ from typing import Any
 
 import numpy as np
 
+from marine_formation_env.core import FormationCore, StepOutput
 from marine_formation_env.errors import check_seed, float_array
 from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config
 
 __all__ = [
     "RESET_OPTIONS",
+    "Rendering",
     "ResetRequest",
     "check_initial_state",
     "check_reset_options",
+    "formation_infos",
     "formation_seeds",
+    "one_entry",
     "read_reset",
     "resolve_config",
+    "vessel_infos",
 ]
 
 #: The keys ``reset(options=…)`` understands.
@@ -171,3 +193,85 @@ def read_reset(
     if initial is not None:
         initial = check_initial_state(config, initial, num_formations)
     return ResetRequest(seeds, channel, initial)
+
+
+# ---------------------------------------------------------------------------- infos
+
+
+def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
+    """The per-vessel info schema (module docstring) as ``(B, N)`` arrays."""
+    b, n = out.reward.shape
+    flags = {"collision": out.collision, "out_of_bounds": out.out_of_bounds}
+    infos: dict[str, Any] = {
+        "reward_components": {key: np.array(value, dtype=np.float64) for key, value in out.components.items()},
+        "time": np.repeat(np.asarray(time, dtype=np.float64)[:, None], n, axis=1),
+        **{key: np.repeat(np.asarray(value, dtype=bool)[:, None], n, axis=1) for key, value in flags.items()},
+    }
+    if out.commanded_speed is not None:
+        infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
+    assert infos["time"].shape == (b, n)
+    return infos
+
+
+def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
+    """The per-formation info schema (module docstring) as arrays with a leading ``(B,)`` axis."""
+    infos: dict[str, Any] = {
+        "vessel_rewards": np.array(out.reward, dtype=np.float64),
+        "reward_components": {key: np.mean(value, axis=1) for key, value in out.components.items()},
+        "time": np.array(time, dtype=np.float64),
+        "collision": np.array(out.collision, dtype=bool),
+        "out_of_bounds": np.array(out.out_of_bounds, dtype=bool),
+    }
+    if out.commanded_speed is not None:
+        infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
+    return infos
+
+
+def one_entry(infos: dict[str, Any], index: tuple[int, ...]) -> dict[str, Any]:
+    """The info of one entry of a stacked info tree, with scalars as Python ``float``/``bool``."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if isinstance(value, dict):
+            out[key] = one_entry(value, index)
+        else:
+            item = value[index]
+            out[key] = item.item() if np.ndim(item) == 0 else item.copy()
+    return out
+
+
+# ---------------------------------------------------------------------------- rendering
+
+
+class Rendering:
+    """The renderer of a front end: created on the first frame (matplotlib is imported then), closed once.
+
+    Args:
+        config: the scenario (the camera frames its workspace).
+        render_mode: ``"rgb_array"``, ``"human"`` or None (then :meth:`frame`
+            warns and returns None, as gymnasium's envs do).
+    """
+
+    def __init__(self, config: ScenarioConfig, render_mode: str | None) -> None:
+        self.config = config
+        self.render_mode = render_mode
+        self._renderer: Any = None
+
+    def frame(self, core: FormationCore, b: int = 0) -> np.ndarray | None:
+        """Draw formation ``b`` of ``core``: an ``(H, W, 3)`` uint8 image (``rgb_array``), or None."""
+        if self.render_mode is None:
+            warnings.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or 'human'", stacklevel=3
+            )
+            return None
+        if self._renderer is None:
+            from marine_formation_env.render import FormationRenderer
+
+            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
+        image: np.ndarray | None = self._renderer.draw(core.state[b], float(core.time[b]), core.links_up(b))
+        return image
+
+    def close(self) -> None:
+        """Close the figure, if one was opened."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

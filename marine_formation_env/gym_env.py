@@ -28,12 +28,11 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from marine_formation_env.core import FormationCore, reset_output
+from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import read_reset, resolve_config
+from marine_formation_env.frontend import Rendering, formation_infos, one_entry, read_reset, resolve_config
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig
-from marine_formation_env.vector import joint_info
 
 __all__ = ["MarineFormationGymEnv"]
 
@@ -62,7 +61,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self.render_mode = render_mode
         self.observation_space = self.core.observation_space(joint=True)
         self.action_space = self.core.action_space(joint=True)
-        self._renderer: Any = None
+        self._rendering = Rendering(self.config, render_mode)
         self._done = True
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
@@ -82,7 +81,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return obs[0].reshape(-1), joint_info(reset_output(obs, self.config.action_level != "force"), 0)
+        return obs[0].reshape(-1), self._info(reset_output(obs, self.config.action_level != "force"))
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the joint action ``(N·A,)`` for one control period."""
@@ -97,19 +96,15 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         if self.render_mode == "human":
             self.render()
         reward = float(out.reward[0].mean())
-        return out.observation[0].reshape(-1), reward, terminated, truncated, joint_info(out, 0)
+        return out.observation[0].reshape(-1), reward, terminated, truncated, self._info(out)
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' or 'human'")
-            return None
-        if self._renderer is None:
-            from marine_formation_env.render import FormationRenderer
-
-            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
-        return self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0))  # type: ignore[no-any-return]
+        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
+        return self._rendering.frame(self.core)
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._rendering.close()
+
+    def _info(self, out: StepOutput) -> dict[str, Any]:
+        """The info in the per-formation schema (:mod:`marine_formation_env.frontend`)."""
+        return one_entry(formation_infos(out, self.core.time), (0,))

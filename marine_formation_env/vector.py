@@ -12,12 +12,16 @@ Two layouts of the same simulation:
 * ``layout="joint"`` (default): one entry per formation, as the centralized
   ``gymnasium.make("MarineFormation-v0")`` view: observation ``(N·dim,)`` (the
   vessels' masked observations concatenated), action ``(N·A,)``, reward the mean
-  of the vessels' rewards. ``num_envs = B``. ``infos["reward_components"]``
-  maps each term to its ``(B, N)`` per-vessel values.
+  of the vessels' rewards. ``num_envs = B``. Infos are the gym view's, stacked:
+  ``infos["vessel_rewards"]`` ``(B, N)``, ``infos["reward_components"]`` maps
+  each term to its ``(B,)`` vessel mean.
 * ``layout="agent"``: one entry per vessel (parameter sharing), entry
   ``b·N + j`` is vessel ``j`` of formation ``b``; observation ``(dim,)``,
   action ``(A,)``, reward that vessel's own. ``num_envs = B·N``; a formation's
-  vessels terminate, truncate and reset together.
+  vessels terminate, truncate and reset together. Infos are the ParallelEnv's
+  per-agent infos, stacked over the ``B·N`` entries.
+
+Both info schemas are documented in :mod:`marine_formation_env.frontend`.
 
 Formation ``b`` is seeded with ``seed + b`` (``reset(seed=int)``) or
 ``seed[b]`` (a list of B seeds), so it reproduces a single
@@ -44,26 +48,13 @@ from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import read_reset, resolve_config
+from marine_formation_env.frontend import Rendering, formation_infos, read_reset, resolve_config, vessel_infos
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["LAYOUTS", "MarineFormationVectorEnv", "joint_info"]
+__all__ = ["LAYOUTS", "MarineFormationVectorEnv"]
 
 LAYOUTS = ("joint", "agent")
-
-
-def joint_info(out: StepOutput, b: int) -> dict[str, Any]:
-    """The info dict of formation ``b`` in the centralized (joint) views."""
-    info: dict[str, Any] = {
-        "vessel_rewards": out.reward[b].astype(np.float64),
-        "reward_components": {key: float(np.mean(value[b])) for key, value in out.components.items()},
-        "collision": bool(out.collision[b]),
-        "out_of_bounds": bool(out.out_of_bounds[b]),
-    }
-    if out.commanded_speed is not None:
-        info["commanded_speed"] = out.commanded_speed[b].astype(np.float64)
-    return info
 
 
 class MarineFormationVectorEnv(VectorEnv):
@@ -117,7 +108,7 @@ class MarineFormationVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(b)]
         self._needs_reset = np.zeros(b, dtype=bool)
-        self._renderer: Any = None
+        self._rendering = Rendering(self.config, render_mode)
         self._started = False
 
     # ------------------------------------------------------------------ reset
@@ -219,39 +210,27 @@ class MarineFormationVectorEnv(VectorEnv):
         return mask if self.layout == "joint" else np.repeat(mask, self.n_vessels)
 
     def _infos(self, out: StepOutput) -> dict[str, Any]:
-        """Vectorized infos: every entry is an array over the entries."""
+        """Infos in the schema of :mod:`marine_formation_env.frontend`, stacked over the entries."""
         if self.layout == "joint":
-            infos: dict[str, Any] = {
-                "reward_components": out.components,  # name -> (B, N): per vessel
-                "collision": out.collision.copy(),
-                "out_of_bounds": out.out_of_bounds.copy(),
-            }
-            if out.commanded_speed is not None:
-                infos["commanded_speed"] = out.commanded_speed.copy()
-            return infos
-        n = self.n_vessels
-        infos = {
-            "reward_components": {k: v.reshape(-1) for k, v in out.components.items()},
-            "collision": np.repeat(out.collision, n),
-            "out_of_bounds": np.repeat(out.out_of_bounds, n),
-        }
-        if out.commanded_speed is not None:
-            infos["commanded_speed"] = out.commanded_speed.reshape(-1)
-        return infos
+            return formation_infos(out, self.core.time)
+        return _flatten_entries(vessel_infos(out, self.core.time))
 
     # --------------------------------------------------------------- extras
     def render(self) -> tuple[np.ndarray, ...] | None:
         """Render formation 0 (``rgb_array``)."""
         if self.render_mode is None:
             return None
-        if self._renderer is None:
-            from marine_formation_env.render import FormationRenderer
-
-            self._renderer = FormationRenderer(self.config)
-        return (self._renderer.draw(self.core.state[0], float(self.core.time[0]), self.core.links_up(0)),)
+        frame = self._rendering.frame(self.core, 0)
+        return None if frame is None else (frame,)
 
     def close_extras(self, **kwargs: Any) -> None:
         """Close the renderer's figure (if one was opened)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._rendering.close()
+
+
+def _flatten_entries(infos: dict[str, Any]) -> dict[str, Any]:
+    """``(B, N, …)`` arrays of an info tree as ``(B·N, …)``: one entry per vessel."""
+    return {
+        key: _flatten_entries(value) if isinstance(value, dict) else value.reshape(-1, *value.shape[2:])
+        for key, value in infos.items()
+    }
