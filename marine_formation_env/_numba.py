@@ -90,7 +90,7 @@ def _clip(x: float, lo: float, hi: float) -> float:
 
 @njit(cache=True, inline="always")
 def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea):  # type: ignore[no-untyped-def]
-    """The closed loop of one vessel (the numpy path's ``FormationCore._closed_loop``).
+    """The closed loop of one vessel (the numpy path's ``FormationCore.closed_loop``).
 
     ``sea = (t0, speed, amplitude, ω, cos β, sin β)``: the period's start time and the current.
     """

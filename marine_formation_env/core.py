@@ -481,7 +481,7 @@ class FormationCore:
         if self._kernel_args is not None:
             out = self._step_compiled(clipped, commands)
         else:
-            rhs = self._closed_loop(commands)
+            rhs = self.closed_loop(commands)
             h = cfg.dt / cfg.substeps
             state = self.state
             for k in range(cfg.substeps):
@@ -564,7 +564,7 @@ class FormationCore:
             out_of_bounds=flags[:, 1].copy(),
         )
 
-    def _closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
+    def closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
         """The vector field ``rhs(t, state)`` of the vessels over one control period.
 
         The inner loops' inputs are saturated at ±tau_u_max, ±tau_r_max, the

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from marine_formation_env import benchmark
+from benchmarks import throughput as benchmark
 from marine_formation_env.dynamics import vessel_rhs
 from marine_formation_env.params import SUPPLY
 

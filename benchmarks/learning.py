@@ -2,7 +2,7 @@
 
 Example::
 
-    python -m training.benchmark --level speed --minutes 15
+    python -m benchmarks.learning --level speed --minutes 15
 
 Trains PPO (``training/configs/paper_<level>_ppo.yaml``: the paper's scenario
 with randomized initial states) until the wall-clock budget is spent, then
@@ -31,7 +31,6 @@ and ``normalized`` stay relative to the paper's controller.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections.abc import Sequence
@@ -42,6 +41,7 @@ from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
 from marine_formation_env import ACTION_LEVELS
+from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
 from training import run_folder
 from training.callbacks import EVAL_SEED, WallClockBudget, evaluate_policy_episodes
@@ -51,7 +51,7 @@ from training.train import train
 
 __all__ = ["main", "run_benchmark"]
 
-CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "training" / "configs"
 
 
 def run_benchmark(
@@ -135,17 +135,19 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m training.benchmark", description=__doc__.split("\n\n")[0])
+    parser = ArgumentParser(prog="python -m benchmarks.learning", description=__doc__.split("\n\n")[0])
     parser.add_argument("--level", choices=list(ACTION_LEVELS), default="speed")
     parser.add_argument("--minutes", type=float, default=15.0, help="wall-clock training budget (default 15)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--episodes", type=int, default=10, help="evaluation episodes per policy (default 10)")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="training seed (default 0)")
+    parser.add_argument(
+        "--episodes", type=int_at_least(1), default=10, help="evaluation episodes per policy (default 10)"
+    )
     parser.add_argument("--config", type=Path, help="training config (default training/configs/paper_<level>_ppo.yaml)")
     parser.add_argument("--out", type=Path, help="run folder (default runs/benchmark_<level>)")
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
-    if args.minutes <= 0 or args.episodes < 1:
-        parser.error(f"--minutes must be > 0 and --episodes ≥ 1, got {args.minutes} and {args.episodes}")
+    if not args.minutes > 0:
+        parser.error(f"--minutes must be > 0, got {args.minutes}")
     out = args.out or Path("runs") / f"benchmark_{args.level}"
     report = run_benchmark(args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet)
     print(format_report(report))

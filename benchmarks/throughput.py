@@ -2,8 +2,8 @@
 
 Example::
 
-    python -m marine_formation_env.benchmark                 # table on stdout, JSON in results/
-    python -m marine_formation_env.benchmark --quick         # fewer repeats and sizes, for a smoke check
+    python -m benchmarks.throughput                 # table on stdout, JSON in results/
+    python -m benchmarks.throughput --quick         # fewer repeats and sizes, for a smoke check
 
 Cases (random actions, 3 agents, ``force`` level, default scenario settings):
 
@@ -200,7 +200,7 @@ def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
     core = FormationCore(make_config("paper", action_level=level), num_envs=1)
     core.reset(core.config.initial_state)
     commands = physical_commands(core.config, np.zeros((1, 3, core.action_dim)))
-    rhs = core._closed_loop(commands)
+    rhs = core.closed_loop(commands)
     state: np.ndarray = core.state.view(_Counter)
     h = core.config.dt / core.config.substeps
     _Counter.ops = {}
@@ -237,7 +237,7 @@ def _subprocess_case(case: str, b: int, min_seconds: float, repeats: int) -> dic
     cmd = [
         sys.executable,
         "-m",
-        "marine_formation_env.benchmark",
+        "benchmarks.throughput",
         "--worker",
         case,
         str(b),
@@ -351,7 +351,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(
-        prog="python -m marine_formation_env.benchmark", description=__doc__.split("\n\n")[0]
+        prog="python -m benchmarks.throughput", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument("--worker", nargs=4, metavar=("CASE", "B", "SECONDS", "REPEATS"), help=argparse.SUPPRESS)
     parser.add_argument("--batch-sizes", type=int, nargs="+", default=list(BATCH_SIZES))
