@@ -11,6 +11,8 @@ from benchmarks import throughput as benchmark
 from marine_formation_env.dynamics import vessel_rhs
 from marine_formation_env.params import SUPPLY
 
+pytestmark = pytest.mark.backend_independent
+
 
 def test_counter_counts_elementwise_operations() -> None:
     benchmark._Counter.ops = {}

@@ -33,6 +33,8 @@ from marine_formation_env.control import (
 )
 from marine_formation_env.params import SUPPLY, Gains
 
+pytestmark = pytest.mark.backend_independent
+
 GAINS = Gains()  # paper values (docs/model.md §5)
 
 

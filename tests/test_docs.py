@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.backend_independent
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("marine_formation_env", "baselines", "training")
 CODE = sorted(p for package in PACKAGES for p in (ROOT / package).rglob("*.py"))

@@ -20,6 +20,8 @@ from scipy.linalg import expm
 from marine_formation_env.dynamics import PSI, R, U, V, X, Y, rk4_step, vessel_rhs, wrap_angle
 from marine_formation_env.params import SUPPLY, VesselParams
 
+pytestmark = pytest.mark.backend_independent
+
 
 def random_params(rng: np.random.Generator) -> VesselParams:
     """A random valid parameter set (M > 0, arbitrary-signed off-diagonal damping)."""

@@ -18,6 +18,8 @@ from scipy.sparse.csgraph import shortest_path
 
 from marine_formation_env.graph import GRAPH_PRESETS, CommGraph, GraphError, make_graph
 
+pytestmark = pytest.mark.backend_independent
+
 
 def closure(adj: np.ndarray) -> np.ndarray:
     """reach[a, b] iff b is reachable from a along edges (a itself included)."""

@@ -29,6 +29,8 @@ from marine_formation_env import ENV_ID, ConfigError, ScenarioConfig
 from marine_formation_env.scenarios import config_from_dict, make_config
 from marine_formation_env.vector import MarineFormationVectorEnv
 
+pytestmark = pytest.mark.backend_independent
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -21,6 +21,8 @@ import pytest
 
 from marine_formation_env.params import SUPPLY, VESSELS, Gains, ParameterError, VesselParams, get_vessel
 
+pytestmark = pytest.mark.backend_independent
+
 # --------------------------------------------------------------------------- data
 # docs/model.md §2 table (SI units).
 MODEL_TABLE = {

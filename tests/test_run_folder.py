@@ -40,6 +40,8 @@ from training.callbacks import EVAL_SEED, evaluate_policy_episodes
 from training.config import TrainConfigError, load_config, validate
 from training.learned import load_learned_policy
 
+pytestmark = pytest.mark.backend_independent
+
 ENV_ID = "MarineFormation-v0"
 REPO = Path(__file__).resolve().parents[1]
 SPEED_CONFIG = REPO / "training" / "configs" / "paper_speed_ppo.yaml"
