@@ -4,11 +4,8 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pytest
-from pettingzoo.test import parallel_api_test
 
-import marine_formation_env
 from baselines.evaluate import main as evaluate_main
 from baselines.evaluate import reference_options
 from baselines.sweep import main as sweep_main
@@ -84,30 +81,3 @@ def test_sweep_writes_table_json_and_figure(tmp_path):
     table = prefix.with_suffix(".md").read_text()
     assert "| loss p \\ latency | 0 s | 2 s |" in table and "### reference:extrapolate" in table
     assert prefix.with_suffix(".png").stat().st_size > 10_000
-
-
-@pytest.mark.filterwarnings("ignore:reset ignores unknown option")
-@pytest.mark.parametrize("scenario", ["acoustic", "radio", "current"])
-def test_presets_pass_the_pettingzoo_api_test(scenario):
-    env = marine_formation_env.parallel_env(scenario, horizon=60.0)
-    parallel_api_test(env, num_cycles=150)
-
-
-def test_no_message_is_seen_before_it_could_have_arrived():
-    """Acoustic TDMA with a 20 s latency: every held message is at least 20 s old, and nothing arrives before 20 s."""
-    env = marine_formation_env.parallel_env("acoustic", channel={"latency": 20.0})
-    space = env.observation_space("vessel_0")
-    obs, _ = env.reset(seed=1)
-    seen = 0
-    for _ in range(200):
-        obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
-        for o in obs.values():
-            assert space.contains(o)
-            linked, ages = o[7::4], o[10::4]
-            assert np.all(ages[linked == 0] == 0)
-            fresh = ages[linked == 1]
-            assert np.all(fresh >= 20.0)
-            seen += fresh.size
-        if env.time < 20.0:
-            assert all(not o[7::4].any() for o in obs.values())
-    assert seen > 0
