@@ -42,85 +42,25 @@ but does not impair (zero loss, zero latency, every period, unlimited range)
 the channel path reproduces them bit for bit (tests/test_channel.py).
 
 Randomness comes only from the channel stream of each formation, separate
-from its initial-state generator and seeded at reset by the front end
-(:func:`channel_streams`): one ``np.random.Generator`` of uniforms for the
-channel and one of normals for the sensor noise. They are served in blocks
-(:class:`BlockStream`: one generator call per formation every few steps, not
-every step), which changes the cost, not the numbers: a formation sees the same
-sequence whatever the batch size.
+from its initial-state generator (:mod:`marine_formation_env.streams`).
+:class:`LinkChannel` takes only what it uses: its :class:`ChannelConfig`, the
+number of vessels, the control period, the graph schedule and the episode
+length.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from marine_formation_env.errors import ConfigError, build_config, check_number, check_seed, whole_periods
+from marine_formation_env.errors import ConfigError, build_config, check_number, whole_periods
+from marine_formation_env.streams import BlockStream, channel_streams
 
-if TYPE_CHECKING:
-    from marine_formation_env.scenarios import ScenarioConfig
-
-__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams"]
-
-#: Spawn key that separates the channel stream from the initial-state stream of one seed.
-CHANNEL_STREAM_KEY = 0x43484E
-
-
-def channel_streams(seed: int | None) -> tuple[np.random.Generator, np.random.Generator]:
-    """The channel's generators for a reset seed: ``(uniforms, normals)``.
-
-    Both are independent of ``np.random.default_rng(seed)`` (the initial-state
-    stream of the same seed) and of each other. ``None`` draws fresh entropy.
-    """
-    root = np.random.SeedSequence(check_seed(seed, "channel seed"), spawn_key=(CHANNEL_STREAM_KEY,))
-    uniform, normal = root.spawn(2)
-    return np.random.default_rng(uniform), np.random.default_rng(normal)
-
-
-class BlockStream:
-    """Per-formation random streams, drawn a block of rows at a time.
-
-    Row ``k`` of formation ``b`` is the ``k``-th ``width`` numbers of its
-    generator, whatever the block size: a generator's ``random`` and
-    ``standard_normal`` give the same sequence in one call or in many. Blocks
-    only save generator calls (one per formation every ``block`` rows). The
-    block size keeps the buffer under ``max_floats`` numbers.
-
-    Args:
-        num_envs: formations ``B``.
-        width: numbers per row.
-        normal: standard normals instead of uniforms in [0, 1).
-        max_floats: buffer budget; ``block = clip(max_floats // (B·width), 1, 64)``.
-    """
-
-    def __init__(self, num_envs: int, width: int, normal: bool = False, max_floats: int = 4_000_000) -> None:
-        self.width = width
-        self.normal = normal
-        self.block = int(np.clip(max_floats // max(1, num_envs * width), 1, 64))
-        self.generators = [np.random.default_rng() for _ in range(num_envs)]
-        self.buffer = np.empty((num_envs, self.block, width))
-        self.pos = np.full(num_envs, self.block)  # every block starts empty
-
-    def seed(self, b: int, generator: np.random.Generator) -> None:
-        """Give formation ``b`` a new generator (its unread numbers are dropped)."""
-        self.generators[b] = generator
-        self.pos[b] = self.block
-
-    def take(self, ids: np.ndarray) -> np.ndarray:
-        """The next row of each formation in ``ids``: ``(len(ids), width)``."""
-        for b in ids[self.pos[ids] >= self.block]:
-            gen = self.generators[b]
-            shape = (self.block, self.width)
-            self.buffer[b] = gen.standard_normal(shape) if self.normal else gen.random(shape)
-            self.pos[b] = 0
-        rows = self.buffer[ids, self.pos[ids]]
-        self.pos[ids] += 1
-        return rows
-
+__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams"]  # streams re-exported
 
 def _probability(owner: str, key: str, value: Any) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 <= value <= 1.0):
@@ -288,29 +228,41 @@ class LinkChannel:
         transmitted: ``(B, N)`` which vessels transmitted at the last update.
     """
 
-    def __init__(self, config: ScenarioConfig, num_envs: int) -> None:
-        ch = config.channel
+    def __init__(
+        self,
+        channel: ChannelConfig,
+        n: int,
+        dt: float,
+        schedule: Sequence[tuple[float, np.ndarray]],
+        max_steps: int,
+        num_envs: int,
+    ) -> None:
+        """
+        Args:
+            channel: how messages travel.
+            n: vessels per formation.
+            dt: the control period [s].
+            schedule: ``((dwell [s], adjacency (n, n)), …)`` repeated
+                periodically; a fixed graph is ``((math.inf, adjacency),)``.
+            max_steps: control periods per episode (delays are capped there).
+            num_envs: formations ``B``.
+        """
+        ch = channel
         self.channel: ChannelConfig = ch
-        self.dt = config.dt
-        n, b = config.n_vessels, num_envs
+        self.dt = dt
+        b = num_envs
         self.n, self.num_envs = n, b
         # one ring slot per possible delay in control periods; a message that would
         # arrive after the episode's last step is never seen, so delays are capped there
-        self.max_delay_steps = min(math.ceil(ch.max_delay / self.dt - 1e-9), config.max_steps)
+        self.max_delay_steps = min(math.ceil(ch.max_delay / self.dt - 1e-9), max_steps)
         self.depth = self.max_delay_steps + 1
-        if config.topology_schedule:
-            self._graphs = np.stack([g.adjacency for _, g in config.topology_schedule])
-            self._ends = np.cumsum([dwell for dwell, _ in config.topology_schedule])
-        else:
-            self._graphs = config.graph.adjacency[None]
-            self._ends = np.array([math.inf])
+        self._graphs = np.stack([np.asarray(adjacency, dtype=bool) for _, adjacency in schedule])
+        self._ends = np.cumsum([dwell for dwell, _ in schedule])
         self._tdma = ch.tdma_slot is not None
         self._every = ch.slot_steps(self.dt) if self._tdma else ch.period_steps(self.dt)
         self._p_fail = -math.expm1(-ch.failure_rate * self.dt)
         self._p_recover = -math.expm1(-ch.recovery_rate * self.dt)
         self._loss: Any = np.asarray(ch.loss) if isinstance(ch.loss, tuple) else ch.loss
-        self._noise = config.sensor_noise.as_array()
-        self._noisy = not config.sensor_noise.is_zero
         shape = (b, n, n)
         self.up = np.zeros(shape, dtype=bool)
         self.has_message = np.zeros(shape, dtype=bool)
@@ -326,7 +278,6 @@ class LinkChannel:
         self._pend_xdot = np.zeros(deep)
         self._pend_time = np.zeros(deep)
         self.uniforms = BlockStream(b, self.draws_per_link * n * n)
-        self.normals = BlockStream(b, 6 * n, normal=True) if self._noisy else None
 
     # ------------------------------------------------------------------ draws
     @property
@@ -335,23 +286,14 @@ class LinkChannel:
         ch = self.channel
         return 1 + int(ch.failure_rate > 0 or ch.recovery_rate > 0) + int(ch.burst is not None) + int(ch.jitter > 0)
 
-    def seed(self, b: int, seed: int | None) -> None:
-        """Seed formation ``b``'s channel stream (:func:`channel_streams`)."""
-        uniform, normal = channel_streams(seed)
-        self.uniforms.seed(b, uniform)
-        if self.normals is not None:
-            self.normals.seed(b, normal)
+    def seed(self, b: int, generator: np.random.Generator) -> None:
+        """Give formation ``b`` a new stream of uniforms (the first of :func:`channel_streams`)."""
+        self.uniforms.seed(b, generator)
 
     def _uniforms(self, ids: np.ndarray) -> np.ndarray:
         """``(draws_per_link, len(ids), N, N)`` uniforms: one row of each formation's stream."""
         rows = self.uniforms.take(ids).reshape(len(ids), self.draws_per_link, self.n, self.n)
         return rows.transpose(1, 0, 2, 3)
-
-    def measurement_noise(self, ids: np.ndarray) -> np.ndarray | None:
-        """``(len(ids), N, 6)`` Gaussian sensor noise for the state columns, or None without noise."""
-        if self.normals is None:
-            return None
-        return self.normals.take(ids).reshape(len(ids), self.n, 6) * self._noise
 
     # ----------------------------------------------------------------- update
     def graph_at(self, time: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ message (module :mod:`marine_formation_env.channel`). With a current, ``u`` and
 from __future__ import annotations
 
 import importlib.util
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -50,6 +51,7 @@ from gymnasium import spaces
 
 from marine_formation_env.channel import LinkChannel
 from marine_formation_env.control import heading_tracking_inputs, integral_los_rate, path_following_inputs
+from marine_formation_env.disturbances import SensorNoiseSource
 from marine_formation_env.dynamics import (
     PSI,
     R,
@@ -79,6 +81,7 @@ from marine_formation_env.rules import (
     terminal_term,
 )
 from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.streams import channel_streams
 
 __all__ = [
     "OWN_FEATURES",
@@ -244,6 +247,8 @@ class FormationCore:
         steps: ``(B,)`` control periods since reset.
         channel: the :class:`~marine_formation_env.channel.LinkChannel`
             between the vessels, or None with the paper's ideal links.
+        sensor_noise: the :class:`~marine_formation_env.disturbances.SensorNoiseSource`
+            of the vessels' measurements of themselves, or None without noise.
     """
 
     def __init__(self, config: ScenarioConfig, num_envs: int = 1, backend: str = "auto") -> None:
@@ -272,7 +277,17 @@ class FormationCore:
         self._current: tuple[float, float, float, float, float] | None = (
             None if config.current.is_zero else config.current.coefficients
         )
-        self.channel = None if config.ideal_observations else LinkChannel(config, self.num_envs)
+        self.channel = None if config.ideal_observations else LinkChannel(
+            config.channel,
+            n,
+            config.dt,
+            [(dwell, g.adjacency) for dwell, g in config.topology_schedule] or [(math.inf, config.graph.adjacency)],
+            config.max_steps,
+            self.num_envs,
+        )
+        self.sensor_noise = (
+            None if config.sensor_noise.is_zero else SensorNoiseSource(config.sensor_noise, n, self.num_envs)
+        )
         self._measured: np.ndarray | None = None  # with sensor noise only
         self._los_sigma = config.los_integral_gain
         self.los_integral = np.zeros((self.num_envs, n))  # e_int of integral LOS [s] (speed level)
@@ -404,7 +419,10 @@ class FormationCore:
             return
         for b, seed in zip(index, seeds, strict=True):
             if seed is not None:
-                self.channel.seed(int(b), int(seed))
+                uniforms, normals = channel_streams(int(seed))
+                self.channel.seed(int(b), uniforms)
+                if self.sensor_noise is not None:
+                    self.sensor_noise.seed(int(b), normals)
 
     def reset(self, initial_state: np.ndarray, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
         """Set the state of formations ``env_ids`` (all if None) and return their observations.
@@ -440,11 +458,10 @@ class FormationCore:
     def _sense(self, ids: np.ndarray) -> None:
         """A control instant for the channel: measure (with noise), transmit, deliver."""
         assert self.channel is not None
-        noise = self.channel.measurement_noise(ids)
-        if noise is not None:
+        if self.sensor_noise is not None:
             if self._measured is None:
                 self._measured = self.state.copy()
-            self._measured[ids] = self.state[ids] + noise
+            self._measured[ids] = self.state[ids] + self.sensor_noise.draw(ids)
         s, time = self.measured[ids], self.time[ids]
         theta, x_dot = self._along_track(s, time, inertial=True)
         self.channel.update(ids, self.steps[ids], time, theta, x_dot, self.state[ids][..., :2])

@@ -27,8 +27,13 @@ import numpy as np
 
 from marine_formation_env.dynamics import current_velocity
 from marine_formation_env.errors import check_number
+from marine_formation_env.streams import BlockStream
 
-__all__ = ["Current", "SensorNoise"]
+__all__ = [
+    "Current",
+    "SensorNoise",
+    "SensorNoiseSource",
+]
 
 
 @dataclass(frozen=True)
@@ -81,8 +86,8 @@ class SensorNoise:
     """Standard deviations of the Gaussian noise on a vessel's measurement of itself.
 
     Fresh, independent noise is drawn every control period from the
-    formation's channel stream (see :mod:`marine_formation_env.channel`). It
-    enters the vessel's own observation and the (x, ẋ) it transmits.
+    formation's stream of normals (:class:`SensorNoiseSource`). It enters the
+    vessel's own observation and the (x, ẋ) it transmits.
 
     Attributes:
         position: on x and y [m].
@@ -108,3 +113,26 @@ class SensorNoise:
     def as_array(self) -> np.ndarray:
         """Standard deviations for the state columns ``x, y, psi, u, v, r``."""
         return np.array([self.position, self.position, self.heading, self.speed, self.speed, self.yaw_rate])
+
+
+class SensorNoiseSource:
+    """The sensor-noise draws of ``B`` formations of ``N`` vessels, held by the core.
+
+    Each formation draws from its own generator of standard normals (the
+    second stream of :func:`~marine_formation_env.streams.channel_streams`),
+    one row of ``6·N`` numbers per control instant, scaled by the standard
+    deviations of :class:`SensorNoise`.
+    """
+
+    def __init__(self, noise: SensorNoise, n: int, num_envs: int) -> None:
+        self.n = n
+        self._scale = noise.as_array()
+        self.normals = BlockStream(num_envs, 6 * n, normal=True)
+
+    def seed(self, b: int, generator: np.random.Generator) -> None:
+        """Give formation ``b`` a new stream of standard normals."""
+        self.normals.seed(b, generator)
+
+    def draw(self, ids: np.ndarray) -> np.ndarray:
+        """``(len(ids), N, 6)`` noise on the state columns ``x, y, psi, u, v, r`` of formations ``ids``."""
+        return self.normals.take(ids).reshape(len(ids), self.n, 6) * self._scale
