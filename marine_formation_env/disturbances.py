@@ -13,7 +13,7 @@
   loops of the ``speed`` and ``guidance`` levels act continuously on the true
   state; only what the policy sees is noisy.
 
-Both are fields of :class:`~marine_formation_env.scenarios.ScenarioConfig`
+Both are fields of :class:`~marine_formation_env.settings.Settings`
 (``current=…``, ``sensor_noise=…``; mappings are accepted).
 """
 

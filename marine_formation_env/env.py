@@ -198,7 +198,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
     rest of the acoustic channel.
 
-    All fields of :class:`~marine_formation_env.scenarios.ScenarioConfig`
+    All fields of :class:`~marine_formation_env.settings.Settings`
     are accepted; an unknown key raises.
 
     ## Version History

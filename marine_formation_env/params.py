@@ -117,20 +117,23 @@ class VesselParams:
             ParameterError: if sway is not damped (Y(u) ≥ 0) somewhere on the
                 band, or if Δ ≤ C_v·U_max (Proposition 1).
         """
-        u = np.linspace(u_min, u_max, 2001)
-        y = self.sway_damping(u)
+        band = f"the speed band [u_min, u_max] = [{u_min}, {u_max}] m/s"
+        with np.errstate(over="ignore", invalid="ignore"):
+            u = np.linspace(u_min, u_max, 2001)
+            y = self.sway_damping(u)
+            bound = self.sway_ratio_bound(u_min, u_max)
+        if not (np.all(np.isfinite(y)) and math.isfinite(bound)):
+            raise ParameterError(f"vessel {self.name!r}: the sway model overflows on {band}; choose a physical band")
         if np.any(y >= 0.0):
             bad = float(u[np.argmax(y)])
             raise ParameterError(
-                f"vessel {self.name!r}: sway is not damped on the speed band "
-                f"[{u_min}, {u_max}] m/s: Y(u={bad:.3g}) = {float(np.max(y)):.4g} 1/s ≥ 0 "
+                f"vessel {self.name!r}: sway is not damped on {band}: Y(u={bad:.3g}) = {float(np.max(y)):.4g} 1/s ≥ 0 "
                 "(the paper's assumption 5 requires Y(u) < 0)"
             )
-        bound = self.sway_ratio_bound(u_min, u_max)
         if not delta > bound:
             raise ParameterError(
-                f"look-ahead distance Δ = {delta} m must exceed C_v·U_max = {bound:.4g} m "
-                f"for vessel {self.name!r} on [{u_min}, {u_max}] m/s (Proposition 1)"
+                f"look-ahead distance Δ = {delta} m (gains.delta) must exceed C_v·U_max = {bound:.4g} m "
+                f"for vessel {self.name!r} on {band} (Proposition 1)"
             )
 
     def as_array(self) -> np.ndarray:

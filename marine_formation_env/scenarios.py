@@ -1,13 +1,15 @@
-"""Scenario configuration: one frozen dataclass holding everything an episode needs.
+"""The scenario the simulation runs: typed, resolved and checked against the paper's assumptions.
 
-A *scenario* is a named set of defaults (:data:`SCENARIOS`); :func:`make_config`
-applies keyword overrides on top of it and validates the result against the
-paper's assumptions, so an environment is never built from a configuration that
-silently breaks them. Every front end (the PettingZoo env, the gymnasium views,
-the vector env) is built from a :class:`ScenarioConfig`.
-
-Override keys are the field names of :class:`ScenarioConfig`; an unknown key
-raises an error that lists the valid ones.
+:func:`make_config` is the usual entry point: a named scenario plus keyword
+overrides (:mod:`marine_formation_env.settings`, what a user writes), resolved
+by :func:`resolve` into a :class:`ScenarioConfig` whose every field has its
+final type (a :class:`~marine_formation_env.graph.CommGraph`, a
+:class:`~marine_formation_env.params.VesselParams`, floats in SI units, …).
+Resolution is a sequence of small named steps; each refuses a value that breaks
+the paper's assumptions with a :class:`ConfigError` that names it, so an
+environment is never built from a configuration that silently breaks them.
+Every front end (the PettingZoo env, the gymnasium views, the vector env) is
+built from a :class:`ScenarioConfig`.
 """
 
 from __future__ import annotations
@@ -15,60 +17,51 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from marine_formation_env.channel import ChannelConfig, GilbertElliott
+from marine_formation_env.channel import ChannelConfig
 from marine_formation_env.disturbances import Current, SensorNoise
-from marine_formation_env.errors import (
-    ConfigError,
-    build_config,
-    check_bool,
-    check_number,
-    check_seed,
-    whole_periods,
-)
+from marine_formation_env.errors import ConfigError, build_config, check_number, check_seed, whole_periods
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
+from marine_formation_env.settings import (
+    ACROSS_SPACING,
+    ACTION_LEVELS,
+    ALONG_SPACING,
+    FORMATIONS,
+    GENERATED_INIT_NOISE,
+    MAX_RK4_STEP,
+    PAPER_INITIAL_STATE,
+    SCENARIOS,
+    InitNoise,
+    RewardConfig,
+    Settings,
+    SpeedProfile,
+    make_settings,
+)
 
 __all__ = [
     "ACTION_LEVELS",
     "FORMATIONS",
+    "GENERATED_INIT_NOISE",
     "PAPER_INITIAL_STATE",
     "SCENARIOS",
     "ConfigError",
     "InitNoise",
     "RewardConfig",
     "ScenarioConfig",
+    "Settings",
     "SpeedProfile",
     "config_from_dict",
     "formation_offsets",
     "initial_state_problem",
     "make_config",
+    "make_settings",
+    "resolve",
 ]
-
-#: What a policy controls (docs/model.md §6), with the default control period dt [s].
-ACTION_LEVELS: dict[str, float] = {"force": 0.1, "guidance": 0.5, "speed": 0.5}
-
-#: Largest RK4 step [s] used when ``substeps`` is not given: ``substeps = ceil(dt/0.1)``.
-MAX_RK4_STEP = 0.1
-
-#: docs/model.md §5 initial state (columns x [m], y [m], ψ [rad], u [m/s], v [m/s], r [rad/s]).
-PAPER_INITIAL_STATE = np.array(
-    [
-        [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
-        [-60.0, 30.0, 0.3, 3.0, 0.0, 0.0],
-        [-120.0, -10.0, -0.2, 3.0, 0.0, 0.0],
-    ]
-)
-
-#: Formation patterns (D_x, D_y) [m] for :func:`formation_offsets`.
-FORMATIONS = ("paper", "v", "line_abreast", "column")
-
-ALONG_SPACING = 100.0  # [m] between rows of the generated formations
-ACROSS_SPACING = 50.0  # [m] between paths of the generated formations
 
 
 def formation_offsets(pattern: str, n: int) -> np.ndarray:
@@ -98,407 +91,75 @@ def formation_offsets(pattern: str, n: int) -> np.ndarray:
     raise ConfigError(f"unknown formation {pattern!r}; known formations: {list(FORMATIONS)}")
 
 
-@dataclass(frozen=True)
-class SpeedProfile:
-    """Desired formation speed ``u_d(t) = mean + amplitude·sin(2πt/period)`` [m/s].
-
-    A constant speed has ``amplitude = 0``. Assumption (19) requires
-    ``u_d(t) ∈ [U_min + a, U_max − a]``, i.e. ``mean ± amplitude`` inside it.
-    """
-
-    mean: float = 5.0
-    amplitude: float = 0.0
-    period: float = 200.0
-
-    def __post_init__(self) -> None:
-        for key in ("mean", "amplitude", "period"):
-            check_number("u_d", key, getattr(self, key), minimum=None)
-        if self.amplitude < 0 or self.period <= 0:
-            raise ConfigError(
-                f"u_d needs amplitude ≥ 0 and period > 0, got amplitude={self.amplitude}, period={self.period}"
-            )
-
-    def value(self, t: np.ndarray | float) -> np.ndarray:
-        """u_d(t) [m/s]."""
-        return self.mean + self.amplitude * np.sin(2.0 * np.pi * np.asarray(t) / self.period)
-
-    def rate(self, t: np.ndarray | float) -> np.ndarray:
-        """u̇_d(t) [m/s²]."""
-        w = 2.0 * np.pi / self.period
-        return self.amplitude * w * np.cos(w * np.asarray(t))
-
-    @property
-    def bounds(self) -> tuple[float, float]:
-        """``(min, max)`` of u_d over all t [m/s]."""
-        return self.mean - self.amplitude, self.mean + self.amplitude
-
-
-@dataclass(frozen=True)
-class InitNoise:
-    """Half-widths of the uniform noise added to the nominal initial state at reset.
-
-    Attributes:
-        x, y: position [m]. psi: heading [rad]. u: surge speed [m/s].
-    """
-
-    x: float = 0.0
-    y: float = 0.0
-    psi: float = 0.0
-    u: float = 0.0
-
-    def __post_init__(self) -> None:
-        for key in ("x", "y", "psi", "u"):
-            check_number("init_noise", key, getattr(self, key))
-
-    def as_array(self) -> np.ndarray:
-        """Half-widths for the state columns ``x, y, psi, u, v, r`` (v, r: 0)."""
-        return np.array([self.x, self.y, self.psi, self.u, 0.0, 0.0])
-
-    @property
-    def is_zero(self) -> bool:
-        return not np.any(self.as_array())
-
-
-@dataclass(frozen=True)
-class RewardConfig:
-    """Weights and scales of the per-agent reward (see the env docstring).
-
-    Each error ``e`` with scale ``σ`` gives the bounded cost
-    ``c(e) = (e/σ)² / (1 + (e/σ)²) ∈ [0, 1)``; the step reward of vessel j is
-    ``−dt·Σ_k w_k·c_k``. A formation that terminates early (collision or leaving
-    the workspace) receives ``−(Σ_k w_k)·(time left)``, the worst reward the rest
-    of the episode could have given, so ending an episode never pays.
-    """
-
-    cross_track: float = 1.0
-    heading: float = 0.25
-    coordination: float = 1.0
-    speed: float = 0.5
-    effort: float = 0.0
-    sigma_cross_track: float = 20.0
-    sigma_heading: float = 0.2
-    sigma_coordination: float = 20.0
-    sigma_speed: float = 1.0
-    terminal_penalty: bool = True
-
-    def __post_init__(self) -> None:
-        check_bool("reward", "terminal_penalty", self.terminal_penalty)
-        for f in dataclasses.fields(self):
-            if f.name == "terminal_penalty":
-                continue
-            value = getattr(self, f.name)
-            check_number("reward", f.name, value)
-            if f.name.startswith("sigma_") and value == 0:
-                raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
-
-    @property
-    def total_weight(self) -> float:
-        """Σ_k w_k: the largest cost rate [1/s]."""
-        return self.cross_track + self.heading + self.coordination + self.speed + self.effort
-
-
 @dataclass(frozen=True, eq=False)
 class ScenarioConfig:
-    """Everything that defines an episode; build it with :func:`make_config`.
+    """Everything that defines an episode, resolved; build it with :func:`make_config` or :func:`resolve`.
+
+    The fields are those of :class:`~marine_formation_env.settings.Settings`
+    (which documents each), with their final types.
 
     Attributes:
         name: scenario name.
         n_vessels: number of vessels n ≥ 2.
-        formation: ``(n, 2)`` desired offsets (D_x, D_y) [m], or a pattern name
-            (:data:`FORMATIONS`).
-        topology: communication graph: a preset name (:func:`make_graph`), a
-            :class:`CommGraph`, or an ``(n, n)`` adjacency matrix
-            (``A[j, i] = 1`` iff i transmits to j).
-        topology_schedule: switching topologies: a sequence of ``(dwell [s],
-            graph)`` pairs (graphs as for ``topology``) that repeats
-            periodically; excludes ``topology``, which then becomes the union
-            of the scheduled graphs (the links that ever exist). Needs
-            reachability of the union only (joint connectivity).
-        topology_seed: seed of the ``random`` topology preset.
-        allow_unreachable: accept a graph without a globally reachable node
-            (consensus then is not guaranteed).
-        vessel: vessel parameter set (name or :class:`VesselParams`).
-        gains: controller gains and consensus saturation ``a``.
-        u_d: desired formation speed [m/s] (number or :class:`SpeedProfile`).
+        formation: ``(n, 2)`` read-only desired offsets (D_x, D_y) [m].
+        topology: the communication graph (with ``topology_schedule``: the
+            union of the scheduled graphs, the links that ever exist).
+        topology_seed: seed of the ``random`` graph preset.
+        allow_unreachable: a graph without a globally reachable node was allowed.
+        vessel: the vessel parameters.
+        gains: controller gains and the consensus saturation ``a``.
+        u_d: the desired formation speed profile.
         u_min, u_max: the controllability band (U_min, U_max) [m/s].
-        action_level: ``force``, ``guidance`` or ``speed`` (docs/model.md §6).
-        dt: control period [s]; default depends on the level (:data:`ACTION_LEVELS`).
-        substeps: RK4 steps per control period; default ``ceil(dt / 0.1)``.
-        horizon: episode length [s]; truncation after ``round(horizon/dt)`` steps.
-        paper_as_printed: run (11) and (14) exactly as printed (docs/model.md §3).
-        initial_state: nominal ``(n, 6)`` initial state, or None for the
-            formation slots at speed u_d(0) heading along the path.
-        init_noise: uniform noise added to the nominal initial state at reset.
-        safety_distance: two vessels closer than this [m] collide (terminates).
-        workspace: ``(x_min, x_max, y_min, y_max)`` [m]; None derives a box that
-            holds the whole nominal run with margins of 500 m (x) and 250 m (y).
-        tau_u_max, tau_r_max: actuator limits [m/s², rad/s²]: the ``force``-level
-            action range, and the saturation of the built-in loops at the other levels.
-        psi_max: ``guidance``-level heading command range ±psi_max [rad].
-        max_speed: envelope of |u| and |v| [m/s]; beyond it the formation
-            terminates (the model is not meant for it). Must exceed u_max.
-        max_yaw_rate: envelope of |r| [rad/s]; beyond it the formation terminates.
+        action_level: ``force``, ``guidance`` or ``speed``.
+        dt: control period [s].
+        substeps: RK4 steps per control period.
+        horizon: episode length [s].
+        paper_as_printed: run (11) and (14) as printed.
+        initial_state: ``(n, 6)`` read-only nominal initial state.
+        init_noise: half-widths of the initial-state noise.
+        safety_distance: collision distance [m] (0: no check).
+        workspace: ``(x_min, x_max, y_min, y_max)`` [m].
+        tau_u_max, tau_r_max: actuator limits [m/s², rad/s²].
+        psi_max: ``guidance``-level heading range ±psi_max [rad].
+        max_speed: envelope of |u|, |v| [m/s]. max_yaw_rate: envelope of |r| [rad/s].
         reward: reward weights and scales.
-        channel: the communication channel (:class:`ChannelConfig`, or a
-            mapping of its fields): loss, latency, update rate, TDMA, range,
-            random link failures. The default is the paper's ideal links.
-        current: an ocean current (:class:`Current` or a mapping); its speed
-            plus amplitude must stay below u_min, or a vessel at the slowest
-            allowed speed could not hold its path.
-        sensor_noise: noise on each vessel's measurement of itself
-            (:class:`SensorNoise` or a mapping).
-        los_integral_gain: σ [m/s] of integral LOS in the ``speed`` level's
-            built-in path follower (our extension, Børhaug, Pavlov and
-            Pettersen, CDC 2008): it steers on ``e + σ·e_int`` with
-            ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)``, integrated once per control
-            period, which removes the steady cross-track error a current
-            leaves. 0: the paper's LOS (12). Choose σ above the largest cross
-            current. Only at ``speed``; at the other levels the policy steers.
+        channel: the communication channel. current: the ocean current.
+        sensor_noise: the noise on each vessel's measurement of itself.
+        topology_schedule: ``((dwell [s], graph), …)``, empty for a fixed graph.
+        los_integral_gain: σ [m/s] of the speed level's integral LOS (0: plain LOS).
     """
 
-    name: str = "custom"
-    n_vessels: int = 3
-    formation: Any = "v"
-    topology: Any = "chain"
-    topology_seed: int = 0
-    allow_unreachable: bool = False
-    vessel: Any = "supply"
-    gains: Gains = field(default_factory=Gains)
-    u_d: Any = 5.0
-    u_min: float = 3.0
-    u_max: float = 7.0
-    action_level: str = "speed"
-    dt: Any = None  # resolved to float: the level's default when None
-    substeps: Any = None  # resolved to int: ceil(dt / 0.1 s) when None
-    horizon: float = 400.0
-    paper_as_printed: bool = False
-    initial_state: Any = None
-    init_noise: Any = field(default_factory=InitNoise)
-    safety_distance: float = 5.0
-    workspace: Any = None
-    tau_u_max: float = 3.0
-    tau_r_max: float = 2.0
-    psi_max: float = math.pi / 2
-    max_speed: float = 14.0
-    max_yaw_rate: float = 1.0
-    reward: Any = field(default_factory=RewardConfig)
-    channel: Any = field(default_factory=ChannelConfig)
-    current: Any = field(default_factory=Current)
-    sensor_noise: Any = field(default_factory=SensorNoise)
-    topology_schedule: Any = ()
-    los_integral_gain: float = 0.0
-
-    def __post_init__(self) -> None:
-        set_ = lambda key, value: object.__setattr__(self, key, value)
-        n = self.n_vessels
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
-            raise ConfigError(f"n_vessels must be an integer ≥ 2, got {n!r}")
-        set_("n_vessels", int(n))
-        if not isinstance(self.name, str):
-            raise ConfigError(f"name must be a string, got {self.name!r}")
-        if not isinstance(self.action_level, str) or self.action_level not in ACTION_LEVELS:
-            raise ConfigError(f"unknown action_level {self.action_level!r}; choose one of {list(ACTION_LEVELS)}")
-        for key in ("paper_as_printed", "allow_unreachable"):
-            if not isinstance(getattr(self, key), bool):
-                raise ConfigError(f"{key} must be True or False, got {getattr(self, key)!r}")
-        try:
-            set_("topology_seed", check_seed(self.topology_seed, "topology_seed", allow_none=False))
-        except (TypeError, ValueError) as err:
-            raise ConfigError(str(err)) from None
-
-        # formation offsets
-        if isinstance(self.formation, str):
-            offsets = formation_offsets(self.formation, n)
-        else:
-            offsets = _float_array(self.formation, "formation", (n, 2))
-        if len({(float(a), float(b)) for a, b in offsets}) < n:
-            raise ConfigError(f"formation offsets must be distinct, got {offsets.tolist()}")
-        set_("formation", _readonly(offsets))
-
-        # communication graph(s)
-        schedule = self._resolve_schedule()
-        if schedule:
-            if self.topology is not None:
-                raise ConfigError(
-                    f"give either topology ({self.topology!r}) or topology_schedule, not both: with a schedule the "
-                    "links come from the scheduled graphs"
-                )
-            union = np.logical_or.reduce([g.adjacency for _, g in schedule])
-            graph = CommGraph(union, name="union of topology_schedule")
-        elif self.topology is None:
-            raise ConfigError("topology must be a preset name, a CommGraph or an (n, n) adjacency matrix, got None")
-        else:
-            graph = self._resolve_graph(self.topology, "topology")
-        if not self.allow_unreachable:
-            try:
-                graph.require_globally_reachable()
-            except GraphError as err:
-                raise ConfigError(f"{'topology_schedule' if schedule else 'topology'}: {err}") from None
-        set_("topology", graph)
-
-        # vessel, gains, speeds: the paper's assumptions
-        try:
-            vessel = get_vessel(self.vessel)
-        except ValueError as err:
-            raise ConfigError(str(err)) from None
-        set_("vessel", vessel)
-        if not isinstance(self.gains, Gains):
-            if isinstance(self.gains, Mapping):
-                set_("gains", build_config(Gains, self.gains, "gains"))
-            else:
-                raise ConfigError(f"gains must be a Gains or a mapping, got {self.gains!r}")
-        for key in (
-            "u_min",
-            "u_max",
-            "horizon",
-            "safety_distance",
-            "tau_u_max",
-            "tau_r_max",
-            "psi_max",
-            "max_speed",
-            "max_yaw_rate",
-        ):
-            value = getattr(self, key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ConfigError(f"{key} must be a finite number, got {value!r}")
-        if not self.u_min > 0:
-            raise ConfigError(f"U_min must be > 0 (the vessels are uncontrollable at rest), got u_min = {self.u_min}")
-        if not self.u_max > self.u_min:
-            raise ConfigError(f"u_max = {self.u_max} must exceed u_min = {self.u_min}")
-        if isinstance(self.u_d, SpeedProfile):
-            profile = self.u_d
-        elif isinstance(self.u_d, Mapping):
-            profile = build_config(SpeedProfile, self.u_d, "u_d")
-        else:
-            profile = SpeedProfile(mean=self.u_d)
-        set_("u_d", profile)
-        lo, hi = profile.bounds
-        a = self.gains.a
-        if lo < self.u_min + a - 1e-12 or hi > self.u_max - a + 1e-12:
-            raise ConfigError(
-                f"u_d(t) ranges over [{lo:g}, {hi:g}] m/s but assumption (19) needs it inside "
-                f"[U_min + a, U_max − a] = [{self.u_min + a:g}, {self.u_max - a:g}] m/s "
-                f"(u_min = {self.u_min:g}, u_max = {self.u_max:g}, gains.a = {a:g})"
-            )
-        try:
-            vessel.validate_speed_band(self.u_min, self.u_max, self.gains.delta)
-        except ParameterError as err:
-            raise ConfigError(str(err)) from None
-
-        # timing
-        dt = ACTION_LEVELS[self.action_level] if self.dt is None else self.dt
-        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (math.isfinite(dt) and dt > 0):
-            raise ConfigError(f"dt (control period) must be a finite number > 0 s, got {dt!r}")
-        set_("dt", float(dt))
-        substeps = max(1, math.ceil(self.dt / MAX_RK4_STEP - 1e-9)) if self.substeps is None else self.substeps
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-            raise ConfigError(f"substeps must be an integer ≥ 1, got {substeps!r}")
-        set_("substeps", int(substeps))
-        for k, (dwell, _) in enumerate(schedule):
-            whole_periods(dwell, self.dt, f"topology_schedule[{k}] dwell")
-        if not self.horizon >= self.dt:
-            raise ConfigError(f"horizon = {self.horizon} s must be at least one control period dt = {self.dt} s")
-        for key in ("tau_u_max", "tau_r_max", "psi_max", "max_yaw_rate"):
-            if not getattr(self, key) > 0:
-                raise ConfigError(f"{key} must be > 0, got {getattr(self, key)!r}")
-        if not self.max_speed > self.u_max:
-            raise ConfigError(f"max_speed = {self.max_speed} m/s must exceed u_max = {self.u_max} m/s")
-        if self.safety_distance < 0:
-            raise ConfigError(f"safety_distance must be ≥ 0 m, got {self.safety_distance!r}")
-
-        # initial state
-        noise = self.init_noise
-        if not isinstance(noise, InitNoise):
-            if isinstance(noise, Mapping):
-                noise = build_config(InitNoise, noise, "init_noise")
-            else:
-                values = _float_array(noise, "init_noise", (4,))
-                noise = InitNoise(*map(float, values))
-            set_("init_noise", noise)
-        if self.initial_state is None:
-            nominal = np.zeros((n, 6))
-            nominal[:, :2] = offsets
-            nominal[:, 3] = float(profile.value(0.0))
-        else:
-            nominal = _float_array(self.initial_state, "initial_state", (n, 6))
-        set_("initial_state", _readonly(nominal))
-
-        if not isinstance(self.reward, RewardConfig):
-            if isinstance(self.reward, Mapping):
-                set_("reward", build_config(RewardConfig, self.reward, "reward"))
-            else:
-                raise ConfigError(f"reward must be a RewardConfig or a mapping, got {self.reward!r}")
-
-        # workspace
-        if self.workspace is None:
-            spread = noise.as_array()
-            x_lo = float(np.min(nominal[:, 0]) - spread[0]) - 500.0
-            x_hi = float(np.max(nominal[:, 0]) + spread[0]) + self.u_max * self.horizon + 500.0
-            y_ext = float(max(np.max(np.abs(nominal[:, 1])) + spread[1], np.max(np.abs(offsets[:, 1])))) + 250.0
-            box = (x_lo, x_hi, -y_ext, y_ext)
-        else:
-            x0, x1, y0, y1 = (float(v) for v in _float_array(self.workspace, "workspace", (4,)))
-            box = (x0, x1, y0, y1)
-            if not (box[0] < box[1] and box[2] < box[3]):
-                raise ConfigError(f"workspace (x_min, x_max, y_min, y_max) must have min < max, got {box}")
-        set_("workspace", box)
-
-        # the sea and the channel (our extensions)
-        for key, cls in (("channel", ChannelConfig), ("current", Current), ("sensor_noise", SensorNoise)):
-            value = getattr(self, key)
-            if not isinstance(value, cls):
-                if not isinstance(value, Mapping):
-                    raise ConfigError(f"{key} must be a {cls.__name__} or a mapping of its fields, got {value!r}")
-                set_(key, build_config(cls, dict(value), key))
-        self.channel.validate(self.dt, n)
-        check_number("scenario", "los_integral_gain", self.los_integral_gain)
-        if self.los_integral_gain > 0 and self.action_level != "speed":
-            raise ConfigError(
-                f"los_integral_gain = {self.los_integral_gain} applies to the speed level's built-in LOS; at "
-                f"action_level {self.action_level!r} the policy steers (ReferencePolicy(env, integral_los=σ) does ILOS)"
-            )
-        strongest = self.current.speed + self.current.amplitude
-        if strongest >= self.u_min:
-            raise ConfigError(
-                f"current speed + amplitude = {strongest:g} m/s must stay below u_min = {self.u_min:g} m/s: a vessel "
-                "at the slowest allowed speed could not hold its path against it"
-            )
-        problem = initial_state_problem(self, nominal, noise.as_array())
-        if problem is not None:
-            raise ConfigError(f"initial_state: {problem}")
-
-    def _resolve_graph(self, spec: Any, name: str) -> CommGraph:
-        n = self.n_vessels
-        try:
-            if isinstance(spec, CommGraph):
-                graph = spec
-            elif isinstance(spec, str):
-                graph = make_graph(spec, n, seed=self.topology_seed)
-            else:
-                graph = CommGraph.from_adjacency(spec)
-        except GraphError as err:
-            raise ConfigError(f"{name}: {err}") from None
-        if graph.n != n:
-            raise ConfigError(f"{name} has {graph.n} vessels but n_vessels = {n}")
-        return graph
-
-    def _resolve_schedule(self) -> tuple[tuple[float, CommGraph], ...]:
-        raw = self.topology_schedule
-        if raw is None or (isinstance(raw, (tuple, list)) and len(raw) == 0):
-            object.__setattr__(self, "topology_schedule", ())
-            return ()
-        if isinstance(raw, (str, Mapping)) or not isinstance(raw, (tuple, list)):
-            raise ConfigError(f"topology_schedule must be a sequence of (dwell_seconds, graph) pairs, got {raw!r}")
-        out = []
-        for k, entry in enumerate(raw):
-            if not isinstance(entry, (tuple, list)) or len(entry) != 2:
-                raise ConfigError(f"topology_schedule[{k}] must be a (dwell_seconds, graph) pair, got {entry!r}")
-            dwell, spec = entry
-            check_number(f"topology_schedule[{k}]", "dwell [s]", dwell, strict=True)
-            out.append((float(dwell), self._resolve_graph(spec, f"topology_schedule[{k}]")))
-        schedule = tuple(out)
-        object.__setattr__(self, "topology_schedule", schedule)
-        return schedule
+    name: str
+    n_vessels: int
+    formation: np.ndarray
+    topology: CommGraph
+    topology_seed: int
+    allow_unreachable: bool
+    vessel: VesselParams
+    gains: Gains
+    u_d: SpeedProfile
+    u_min: float
+    u_max: float
+    action_level: str
+    dt: float
+    substeps: int
+    horizon: float
+    paper_as_printed: bool
+    initial_state: np.ndarray
+    init_noise: InitNoise
+    safety_distance: float
+    workspace: tuple[float, float, float, float]
+    tau_u_max: float
+    tau_r_max: float
+    psi_max: float
+    max_speed: float
+    max_yaw_rate: float
+    reward: RewardConfig
+    channel: ChannelConfig
+    current: Current
+    sensor_noise: SensorNoise
+    topology_schedule: tuple[tuple[float, CommGraph], ...]
+    los_integral_gain: float
 
     # --------------------------------------------------------------- derived
     @property
@@ -508,13 +169,13 @@ class ScenarioConfig:
 
     @property
     def graph(self) -> CommGraph:
-        """The resolved communication graph."""
-        return self.topology  # type: ignore[no-any-return]
+        """The communication graph (the union of the schedule's graphs with ``topology_schedule``)."""
+        return self.topology
 
     @property
     def params(self) -> VesselParams:
-        """The resolved vessel parameters."""
-        return self.vessel  # type: ignore[no-any-return]
+        """The vessel parameters."""
+        return self.vessel
 
     @property
     def max_steps(self) -> int:
@@ -545,6 +206,303 @@ class ScenarioConfig:
                 value = list(value)
             out[f.name] = _finite_json(value)
         return out
+
+
+
+def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
+    """Build a validated :class:`ScenarioConfig` from a scenario name and overrides.
+
+    ``resolve(make_settings(scenario, **overrides))``: see
+    :func:`~marine_formation_env.settings.make_settings` for how overrides
+    combine with a preset (a mapping for a nested setting updates it field by
+    field; changing ``n_vessels`` switches to a generated formation).
+
+    Raises:
+        ConfigError: unknown scenario or key, or any invalid value.
+    """
+    return resolve(make_settings(scenario, **overrides))
+
+
+def resolve(settings: Settings) -> ScenarioConfig:
+    """Check ``settings`` and turn every field into its final type (module docstring).
+
+    Raises:
+        ConfigError: the first invalid value, named, in the order of the steps below.
+    """
+    s = settings
+    n, topology_seed = _resolve_identity(s)
+    offsets = _resolve_formation(s.formation, n)
+    schedule, graph = _resolve_graphs(s, n, topology_seed)
+    vessel, gains, profile = _resolve_vessel_and_speeds(s)
+    dt, substeps = _resolve_timing(s, schedule)
+    noise, nominal = _resolve_initial_state(s, n, offsets, profile)
+    reward = _resolve_part(s.reward, RewardConfig, "reward")
+    workspace = _resolve_workspace(s, nominal, noise, offsets)
+    channel, current, sensor_noise = _resolve_sea_and_links(s, dt, n)
+    config = ScenarioConfig(
+        name=s.name,
+        n_vessels=n,
+        formation=_readonly(offsets),
+        topology=graph,
+        topology_seed=topology_seed,
+        allow_unreachable=s.allow_unreachable,
+        vessel=vessel,
+        gains=gains,
+        u_d=profile,
+        u_min=float(s.u_min),
+        u_max=float(s.u_max),
+        action_level=s.action_level,
+        dt=dt,
+        substeps=substeps,
+        horizon=float(s.horizon),
+        paper_as_printed=s.paper_as_printed,
+        initial_state=_readonly(nominal),
+        init_noise=noise,
+        safety_distance=float(s.safety_distance),
+        workspace=workspace,
+        tau_u_max=float(s.tau_u_max),
+        tau_r_max=float(s.tau_r_max),
+        psi_max=float(s.psi_max),
+        max_speed=float(s.max_speed),
+        max_yaw_rate=float(s.max_yaw_rate),
+        reward=reward,
+        channel=channel,
+        current=current,
+        sensor_noise=sensor_noise,
+        topology_schedule=schedule,
+        los_integral_gain=float(s.los_integral_gain),
+    )
+    problem = initial_state_problem(config, nominal, noise.as_array())
+    if problem is not None:
+        raise ConfigError(f"initial_state: {problem}")
+    return config
+
+
+def _resolve_identity(s: Settings) -> tuple[int, int]:
+    """``n_vessels`` and ``topology_seed`` as ints; ``name``, ``action_level`` and the switches checked."""
+    n = s.n_vessels
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 2:
+        raise ConfigError(f"n_vessels must be an integer ≥ 2, got {n!r}")
+    if not isinstance(s.name, str):
+        raise ConfigError(f"name must be a string, got {s.name!r}")
+    if not isinstance(s.action_level, str) or s.action_level not in ACTION_LEVELS:
+        raise ConfigError(f"unknown action_level {s.action_level!r}; choose one of {list(ACTION_LEVELS)}")
+    for key in ("paper_as_printed", "allow_unreachable"):
+        if not isinstance(getattr(s, key), bool):
+            raise ConfigError(f"{key} must be True or False, got {getattr(s, key)!r}")
+    try:
+        seed = check_seed(s.topology_seed, "topology_seed", allow_none=False)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(str(err)) from None
+    assert seed is not None
+    return int(n), seed
+
+
+def _resolve_formation(formation: Any, n: int) -> np.ndarray:
+    """The ``(n, 2)`` offsets (D_x, D_y) [m] of a pattern name or an array; distinct."""
+    if isinstance(formation, str):
+        offsets = formation_offsets(formation, n)
+    else:
+        offsets = _float_array(formation, "formation", (n, 2))
+    if len({(float(a), float(b)) for a, b in offsets}) < n:
+        raise ConfigError(f"formation offsets must be distinct, got {offsets.tolist()}")
+    return offsets
+
+
+def _resolve_graphs(
+    s: Settings, n: int, topology_seed: int
+) -> tuple[tuple[tuple[float, CommGraph], ...], CommGraph]:
+    """The schedule of graphs (empty for a fixed graph) and the graph of the links that ever exist."""
+    schedule = _resolve_schedule(s.topology_schedule, n, topology_seed)
+    if schedule:
+        if s.topology is not None:
+            raise ConfigError(
+                f"give either topology ({s.topology!r}) or topology_schedule, not both: with a schedule the "
+                "links come from the scheduled graphs"
+            )
+        union = np.logical_or.reduce([g.adjacency for _, g in schedule])
+        graph = CommGraph(union, name="union of topology_schedule")
+    elif s.topology is None:
+        raise ConfigError("topology must be a preset name, a CommGraph or an (n, n) adjacency matrix, got None")
+    else:
+        graph = _resolve_graph(s.topology, "topology", n, topology_seed)
+    if not s.allow_unreachable:
+        try:
+            graph.require_globally_reachable()
+        except GraphError as err:
+            raise ConfigError(f"{'topology_schedule' if schedule else 'topology'}: {err}") from None
+    return schedule, graph
+
+
+def _resolve_graph(spec: Any, name: str, n: int, topology_seed: int) -> CommGraph:
+    try:
+        if isinstance(spec, CommGraph):
+            graph = spec
+        elif isinstance(spec, str):
+            graph = make_graph(spec, n, seed=topology_seed)
+        else:
+            graph = CommGraph.from_adjacency(spec)
+    except GraphError as err:
+        raise ConfigError(f"{name}: {err}") from None
+    if graph.n != n:
+        raise ConfigError(f"{name} has {graph.n} vessels but n_vessels = {n}")
+    return graph
+
+
+def _resolve_schedule(raw: Any, n: int, topology_seed: int) -> tuple[tuple[float, CommGraph], ...]:
+    if raw is None or (isinstance(raw, (tuple, list)) and len(raw) == 0):
+        return ()
+    if isinstance(raw, (str, Mapping)) or not isinstance(raw, (tuple, list)):
+        raise ConfigError(f"topology_schedule must be a sequence of (dwell_seconds, graph) pairs, got {raw!r}")
+    out = []
+    for k, entry in enumerate(raw):
+        if not isinstance(entry, (tuple, list)) or len(entry) != 2:
+            raise ConfigError(f"topology_schedule[{k}] must be a (dwell_seconds, graph) pair, got {entry!r}")
+        dwell, spec = entry
+        check_number(f"topology_schedule[{k}]", "dwell [s]", dwell, strict=True)
+        out.append((float(dwell), _resolve_graph(spec, f"topology_schedule[{k}]", n, topology_seed)))
+    return tuple(out)
+
+
+def _resolve_vessel_and_speeds(s: Settings) -> tuple[VesselParams, Gains, SpeedProfile]:
+    """The vessel, the gains and u_d(t), checked against assumption (19) and the sway bound of Proposition 1."""
+    try:
+        vessel = get_vessel(s.vessel)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    if isinstance(s.gains, Gains):
+        gains = s.gains
+    elif isinstance(s.gains, Mapping):
+        gains = build_config(Gains, s.gains, "gains")
+    else:
+        raise ConfigError(f"gains must be a Gains or a mapping, got {s.gains!r}")
+    for key in (
+        "u_min",
+        "u_max",
+        "horizon",
+        "safety_distance",
+        "tau_u_max",
+        "tau_r_max",
+        "psi_max",
+        "max_speed",
+        "max_yaw_rate",
+    ):
+        value = getattr(s, key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{key} must be a finite number, got {value!r}")
+    if not s.u_min > 0:
+        raise ConfigError(f"U_min must be > 0 (the vessels are uncontrollable at rest), got u_min = {s.u_min}")
+    if not s.u_max > s.u_min:
+        raise ConfigError(f"u_max = {s.u_max} must exceed u_min = {s.u_min}")
+    if isinstance(s.u_d, SpeedProfile):
+        profile = s.u_d
+    elif isinstance(s.u_d, Mapping):
+        profile = build_config(SpeedProfile, s.u_d, "u_d")
+    else:
+        profile = SpeedProfile(mean=s.u_d)
+    lo, hi = profile.bounds
+    a = gains.a
+    if lo < s.u_min + a - 1e-12 or hi > s.u_max - a + 1e-12:
+        raise ConfigError(
+            f"u_d(t) ranges over [{lo:g}, {hi:g}] m/s but assumption (19) needs it inside "
+            f"[U_min + a, U_max − a] = [{s.u_min + a:g}, {s.u_max - a:g}] m/s "
+            f"(u_min = {s.u_min:g}, u_max = {s.u_max:g}, gains.a = {a:g})"
+        )
+    try:
+        vessel.validate_speed_band(s.u_min, s.u_max, gains.delta)
+    except ParameterError as err:
+        raise ConfigError(str(err)) from None
+    return vessel, gains, profile
+
+
+def _resolve_timing(s: Settings, schedule: tuple[tuple[float, CommGraph], ...]) -> tuple[float, int]:
+    """``dt`` (the level's default when None) and ``substeps``; the horizon and the limits checked."""
+    dt = ACTION_LEVELS[s.action_level] if s.dt is None else s.dt
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not (math.isfinite(dt) and dt > 0):
+        raise ConfigError(f"dt (control period) must be a finite number > 0 s, got {dt!r}")
+    dt = float(dt)
+    if not s.horizon >= dt:
+        raise ConfigError(f"horizon = {s.horizon} s must be at least one control period dt = {dt} s")
+    substeps = max(1, math.ceil(dt / MAX_RK4_STEP - 1e-9)) if s.substeps is None else s.substeps
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
+        raise ConfigError(f"substeps must be an integer ≥ 1, got {substeps!r}")
+    for k, (dwell, _) in enumerate(schedule):
+        whole_periods(dwell, dt, f"topology_schedule[{k}] dwell")
+    for key in ("tau_u_max", "tau_r_max", "psi_max", "max_yaw_rate"):
+        if not getattr(s, key) > 0:
+            raise ConfigError(f"{key} must be > 0, got {getattr(s, key)!r}")
+    if not s.max_speed > s.u_max:
+        raise ConfigError(f"max_speed = {s.max_speed} m/s must exceed u_max = {s.u_max} m/s")
+    if s.safety_distance < 0:
+        raise ConfigError(f"safety_distance must be ≥ 0 m, got {s.safety_distance!r}")
+    return dt, int(substeps)
+
+
+def _resolve_initial_state(
+    s: Settings, n: int, offsets: np.ndarray, profile: SpeedProfile
+) -> tuple[InitNoise, np.ndarray]:
+    """The initial-state noise and the nominal ``(n, 6)`` state (the formation slots at u_d(0) when None)."""
+    noise = s.init_noise
+    if not isinstance(noise, InitNoise):
+        if isinstance(noise, Mapping):
+            noise = build_config(InitNoise, noise, "init_noise")
+        else:
+            values = _float_array(noise, "init_noise", (4,))
+            noise = InitNoise(*map(float, values))
+    if s.initial_state is None:
+        nominal = np.zeros((n, 6))
+        nominal[:, :2] = offsets
+        nominal[:, 3] = float(profile.value(0.0))
+    else:
+        nominal = _float_array(s.initial_state, "initial_state", (n, 6))
+    return noise, nominal
+
+
+def _resolve_part(value: Any, cls: type, name: str) -> Any:
+    """A nested setting: an instance of ``cls`` as it is, or a mapping of its fields."""
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        return build_config(cls, dict(value), name)
+    article = "an" if cls.__name__[0] in "AEIOU" else "a"
+    raise ConfigError(f"{name} must be {article} {cls.__name__} or a mapping of its fields, got {value!r}")
+
+
+def _resolve_workspace(
+    s: Settings, nominal: np.ndarray, noise: InitNoise, offsets: np.ndarray
+) -> tuple[float, float, float, float]:
+    """The workspace box; by default one that holds the whole nominal run with margins of 500 m and 250 m."""
+    if s.workspace is None:
+        spread = noise.as_array()
+        x_lo = float(np.min(nominal[:, 0]) - spread[0]) - 500.0
+        x_hi = float(np.max(nominal[:, 0]) + spread[0]) + s.u_max * s.horizon + 500.0
+        y_ext = float(max(np.max(np.abs(nominal[:, 1])) + spread[1], np.max(np.abs(offsets[:, 1])))) + 250.0
+        return (x_lo, x_hi, -y_ext, y_ext)
+    x0, x1, y0, y1 = (float(v) for v in _float_array(s.workspace, "workspace", (4,)))
+    if not (x0 < x1 and y0 < y1):
+        raise ConfigError(f"workspace (x_min, x_max, y_min, y_max) must have min < max, got {(x0, x1, y0, y1)}")
+    return (x0, x1, y0, y1)
+
+
+def _resolve_sea_and_links(s: Settings, dt: float, n: int) -> tuple[ChannelConfig, Current, SensorNoise]:
+    """The channel, the current and the sensor noise (our extensions), checked against dt and the speed band."""
+    channel = _resolve_part(s.channel, ChannelConfig, "channel")
+    current = _resolve_part(s.current, Current, "current")
+    sensor_noise = _resolve_part(s.sensor_noise, SensorNoise, "sensor_noise")
+    channel.validate(dt, n)
+    check_number("scenario", "los_integral_gain", s.los_integral_gain)
+    if s.los_integral_gain > 0 and s.action_level != "speed":
+        raise ConfigError(
+            f"los_integral_gain = {s.los_integral_gain} applies to the speed level's built-in LOS; at "
+            f"action_level {s.action_level!r} the policy steers (ReferencePolicy(env, integral_los=σ) does ILOS)"
+        )
+    strongest = current.speed + current.amplitude
+    if strongest >= s.u_min:
+        raise ConfigError(
+            f"current speed + amplitude = {strongest:g} m/s must stay below u_min = {s.u_min:g} m/s: a vessel "
+            "at the slowest allowed speed could not hold its path against it"
+        )
+    return channel, current, sensor_noise
 
 
 def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.ndarray | None = None) -> str | None:
@@ -604,7 +562,7 @@ def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
     if not isinstance(data, Mapping):
         raise ConfigError(f"a scenario description must be a mapping, got {data!r}")
     values = _from_json(dict(data))
-    unknown = sorted(set(values) - {f.name for f in dataclasses.fields(ScenarioConfig)})
+    unknown = sorted(set(values) - {f.name for f in dataclasses.fields(Settings)})
     if unknown:
         raise ConfigError(f"unknown scenario key(s) {unknown} in the description")
     n = values.get("n_vessels", 3)
@@ -623,7 +581,7 @@ def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
             values["vessel"] = VesselParams(**vessel)
     except (KeyError, TypeError, GraphError, ParameterError) as err:
         raise ConfigError(f"not a scenario description written by ScenarioConfig.to_dict: {err!r}") from None
-    return ScenarioConfig(**values)
+    return resolve(Settings(**values))
 
 
 def _from_json(value: Any) -> Any:
@@ -667,107 +625,3 @@ def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
     return arr
 
 
-#: The paper's scenario (docs/model.md §5).
-_PAPER: dict[str, Any] = {
-    "name": "paper",
-    "n_vessels": 3,
-    "formation": "paper",
-    "topology": "paper",
-    "initial_state": PAPER_INITIAL_STATE,
-    # The docs/model.md §5 initial state makes vessel_0 and vessel_1 cross paths: under
-    # the paper's controller they pass 0.5-0.7 m apart (as point masses). The
-    # paper does not model collisions, so the check is off in this scenario.
-    "safety_distance": 0.0,
-}
-
-#: Named scenarios: defaults that :func:`make_config` starts from. Besides the
-#: paper's own, three presets put its scenario into the sea the paper is
-#: motivated by (numbers and reasons in the README, "Beyond the paper"):
-#:
-#: * ``acoustic``: underwater acoustic modems. One shared channel in TDMA with
-#:   4 s slots (a short acoustic frame at tens to hundreds of bit/s takes
-#:   seconds), so each vessel updates every 12 s; 1-2 s from sending to
-#:   arrival (frame duration plus sound at ~1500 m/s, decoding); bursty loss
-#:   (Gilbert–Elliott, 20 % of messages lost on average, bad spells of about
-#:   3 messages); 2 km range.
-#: * ``radio``: surface radio. One shared channel in TDMA with 0.5 s slots
-#:   (each vessel updates every 1.5 s), 5 % independent loss, 50 ms latency
-#:   (delivered at the next control instant, as a message never arrives
-#:   before it could), 5 km range.
-#: * ``current``: a 0.5 m/s cross current (towards +y), constant, over ideal links.
-SCENARIOS: dict[str, dict[str, Any]] = {
-    "paper": _PAPER,
-    "acoustic": {
-        **_PAPER,
-        "name": "acoustic",
-        "channel": ChannelConfig(
-            burst=GilbertElliott(p_good_to_bad=0.1, p_bad_to_good=0.35, loss_good=0.05, loss_bad=0.75),
-            latency=1.0,
-            jitter=1.0,
-            tdma_slot=4.0,
-            range=2000.0,
-        ),
-    },
-    "radio": {
-        **_PAPER,
-        "name": "radio",
-        "channel": ChannelConfig(loss=0.05, latency=0.05, tdma_slot=0.5, range=5000.0),
-    },
-    "current": {**_PAPER, "name": "current", "current": Current(speed=0.5, direction=math.pi / 2)},
-}
-
-#: Initial-state noise used when the formation is generated (n differs from the
-#: scenario's): around the slots, ±40 m along, ±20 m across, ±0.3 rad, ±1 m/s.
-GENERATED_INIT_NOISE = InitNoise(x=40.0, y=20.0, psi=0.3, u=1.0)
-
-
-def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
-    """Build a validated :class:`ScenarioConfig` from a scenario name and overrides.
-
-    Overriding ``n_vessels`` away from the scenario's value without giving
-    ``formation`` / ``initial_state`` switches to a generated ``v`` formation
-    and random initial states around its slots (:data:`GENERATED_INIT_NOISE`),
-    with the default collision check (the ``paper`` scenario turns it off for
-    its own initial state only).
-
-    A mapping given for a field that holds a dataclass (``channel``,
-    ``current``, ``sensor_noise``, ``gains``, ``reward``, ``init_noise``,
-    ``u_d``) updates the scenario's value field by field:
-    ``make_config("acoustic", channel={"latency": 3.0})`` keeps the rest of
-    the acoustic channel. Giving ``topology_schedule`` without ``topology``
-    replaces the scenario's fixed graph by the schedule.
-
-    Raises:
-        ConfigError: unknown scenario or key, or any invalid value.
-    """
-    if not isinstance(scenario, str) or scenario not in SCENARIOS:
-        raise ConfigError(f"unknown scenario {scenario!r}; known scenarios: {sorted(SCENARIOS)}")
-    base = dict(SCENARIOS[scenario])
-    valid = {f.name for f in dataclasses.fields(ScenarioConfig)}
-    unknown = sorted(set(overrides) - valid)
-    if unknown:
-        raise ConfigError(f"unknown override(s) {unknown}; valid keys: {sorted(valid)}")
-    n_default = base.get("n_vessels", 3)
-    if "n_vessels" in overrides and overrides["n_vessels"] != n_default:
-        if "formation" not in overrides:
-            base["formation"] = "v"
-        if "initial_state" not in overrides:
-            base["initial_state"] = None
-            base.pop("safety_distance", None)  # the scenario's value belongs to its own initial state
-            base.setdefault("init_noise", GENERATED_INIT_NOISE)
-            if isinstance(base["init_noise"], InitNoise) and base["init_noise"].is_zero:
-                base["init_noise"] = GENERATED_INIT_NOISE
-    if overrides.get("topology_schedule") and "topology" not in overrides:
-        base["topology"] = None
-    defaults = {f.name: f for f in dataclasses.fields(ScenarioConfig)}
-    for key, value in overrides.items():
-        current = base.get(key)
-        factory = defaults[key].default_factory
-        if current is None and callable(factory):
-            current = factory()
-        if isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
-            # unknown keys are reported when ScenarioConfig builds the merged mapping
-            base[key] = {**{f.name: getattr(current, f.name) for f in dataclasses.fields(current)}, **value}
-        else:
-            base[key] = value
-    return ScenarioConfig(**base)

@@ -1,0 +1,365 @@
+"""What a user writes: the settings of a scenario, the named presets, and overrides.
+
+:class:`Settings` is a plain record of every knob, in the units and forms a
+user writes them (a preset name or an adjacency matrix for the graph, a number
+or a :class:`SpeedProfile` for the speed, mappings for the nested settings).
+It checks nothing by itself: :func:`marine_formation_env.scenarios.resolve`
+turns it into the typed :class:`~marine_formation_env.scenarios.ScenarioConfig`
+the simulation runs, validating it against the paper's assumptions on the way.
+
+A *scenario* is a named set of settings (:data:`SCENARIOS`);
+:func:`make_settings` applies keyword overrides on top of one. Override keys
+are the field names of :class:`Settings`; an unknown key raises an error that
+lists the valid ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from marine_formation_env.channel import ChannelConfig, GilbertElliott
+from marine_formation_env.disturbances import Current, SensorNoise
+from marine_formation_env.errors import ConfigError, check_bool, check_number
+from marine_formation_env.params import Gains
+
+__all__ = [
+    "ACTION_LEVELS",
+    "FORMATIONS",
+    "GENERATED_INIT_NOISE",
+    "PAPER_INITIAL_STATE",
+    "SCENARIOS",
+    "InitNoise",
+    "RewardConfig",
+    "Settings",
+    "SpeedProfile",
+    "make_settings",
+]
+
+#: What a policy controls (docs/model.md §6), with the default control period dt [s].
+ACTION_LEVELS: dict[str, float] = {"force": 0.1, "guidance": 0.5, "speed": 0.5}
+
+#: Largest RK4 step [s] used when ``substeps`` is not given: ``substeps = ceil(dt/0.1)``.
+MAX_RK4_STEP = 0.1
+
+#: docs/model.md §5 initial state (columns x [m], y [m], ψ [rad], u [m/s], v [m/s], r [rad/s]).
+PAPER_INITIAL_STATE = np.array(
+    [
+        [-50.0, 20.0, 0.0, 3.0, 0.0, 0.0],
+        [-60.0, 30.0, 0.3, 3.0, 0.0, 0.0],
+        [-120.0, -10.0, -0.2, 3.0, 0.0, 0.0],
+    ]
+)
+
+#: Formation patterns (D_x, D_y) [m] for :func:`formation_offsets`.
+FORMATIONS = ("paper", "v", "line_abreast", "column")
+
+ALONG_SPACING = 100.0  # [m] between rows of the generated formations
+ACROSS_SPACING = 50.0  # [m] between paths of the generated formations
+
+
+@dataclass(frozen=True)
+class SpeedProfile:
+    """Desired formation speed ``u_d(t) = mean + amplitude·sin(2πt/period)`` [m/s].
+
+    A constant speed has ``amplitude = 0``. Assumption (19) requires
+    ``u_d(t) ∈ [U_min + a, U_max − a]``, i.e. ``mean ± amplitude`` inside it.
+    """
+
+    mean: float = 5.0
+    amplitude: float = 0.0
+    period: float = 200.0
+
+    def __post_init__(self) -> None:
+        for key in ("mean", "amplitude", "period"):
+            check_number("u_d", key, getattr(self, key), minimum=None)
+        if self.amplitude < 0 or self.period <= 0:
+            raise ConfigError(
+                f"u_d needs amplitude ≥ 0 and period > 0, got amplitude={self.amplitude}, period={self.period}"
+            )
+
+    def value(self, t: np.ndarray | float) -> np.ndarray:
+        """u_d(t) [m/s]."""
+        return self.mean + self.amplitude * np.sin(2.0 * np.pi * np.asarray(t) / self.period)
+
+    def rate(self, t: np.ndarray | float) -> np.ndarray:
+        """u̇_d(t) [m/s²]."""
+        w = 2.0 * np.pi / self.period
+        return self.amplitude * w * np.cos(w * np.asarray(t))
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """``(min, max)`` of u_d over all t [m/s]."""
+        return self.mean - self.amplitude, self.mean + self.amplitude
+
+
+@dataclass(frozen=True)
+class InitNoise:
+    """Half-widths of the uniform noise added to the nominal initial state at reset.
+
+    Attributes:
+        x, y: position [m]. psi: heading [rad]. u: surge speed [m/s].
+    """
+
+    x: float = 0.0
+    y: float = 0.0
+    psi: float = 0.0
+    u: float = 0.0
+
+    def __post_init__(self) -> None:
+        for key in ("x", "y", "psi", "u"):
+            check_number("init_noise", key, getattr(self, key))
+
+    def as_array(self) -> np.ndarray:
+        """Half-widths for the state columns ``x, y, psi, u, v, r`` (v, r: 0)."""
+        return np.array([self.x, self.y, self.psi, self.u, 0.0, 0.0])
+
+    @property
+    def is_zero(self) -> bool:
+        return not np.any(self.as_array())
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights and scales of the per-agent reward (see the env docstring).
+
+    Each error ``e`` with scale ``σ`` gives the bounded cost
+    ``c(e) = (e/σ)² / (1 + (e/σ)²) ∈ [0, 1)``; the step reward of vessel j is
+    ``−dt·Σ_k w_k·c_k``. A formation that terminates early (collision or leaving
+    the workspace) receives ``−(Σ_k w_k)·(time left)``, the worst reward the rest
+    of the episode could have given, so ending an episode never pays.
+    """
+
+    cross_track: float = 1.0
+    heading: float = 0.25
+    coordination: float = 1.0
+    speed: float = 0.5
+    effort: float = 0.0
+    sigma_cross_track: float = 20.0
+    sigma_heading: float = 0.2
+    sigma_coordination: float = 20.0
+    sigma_speed: float = 1.0
+    terminal_penalty: bool = True
+
+    def __post_init__(self) -> None:
+        check_bool("reward", "terminal_penalty", self.terminal_penalty)
+        for f in dataclasses.fields(self):
+            if f.name == "terminal_penalty":
+                continue
+            value = getattr(self, f.name)
+            check_number("reward", f.name, value)
+            if f.name.startswith("sigma_") and value == 0:
+                raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
+
+    @property
+    def total_weight(self) -> float:
+        """Σ_k w_k: the largest cost rate [1/s]."""
+        return self.cross_track + self.heading + self.coordination + self.speed + self.effort
+
+
+@dataclass(frozen=True, eq=False)
+class Settings:
+    """Every setting of a scenario, as a user writes it (nothing is checked here).
+
+    Build it with :func:`make_settings` (a preset plus overrides);
+    :func:`~marine_formation_env.scenarios.resolve` checks it and returns the
+    :class:`~marine_formation_env.scenarios.ScenarioConfig` the simulation runs.
+
+    Attributes:
+        name: scenario name.
+        n_vessels: number of vessels n ≥ 2.
+        formation: ``(n, 2)`` desired offsets (D_x, D_y) [m], or a pattern name
+            (:data:`FORMATIONS`).
+        topology: communication graph: a preset name (:func:`make_graph`), a
+            :class:`CommGraph`, or an ``(n, n)`` adjacency matrix
+            (``A[j, i] = 1`` iff i transmits to j).
+        topology_schedule: switching topologies: a sequence of ``(dwell [s],
+            graph)`` pairs (graphs as for ``topology``) that repeats
+            periodically; excludes ``topology``, which then becomes the union
+            of the scheduled graphs (the links that ever exist). Needs
+            reachability of the union only (joint connectivity).
+        topology_seed: seed of the ``random`` topology preset.
+        allow_unreachable: accept a graph without a globally reachable node
+            (consensus then is not guaranteed).
+        vessel: vessel parameter set (name or :class:`VesselParams`).
+        gains: controller gains and consensus saturation ``a``.
+        u_d: desired formation speed [m/s] (number or :class:`SpeedProfile`).
+        u_min, u_max: the controllability band (U_min, U_max) [m/s].
+        action_level: ``force``, ``guidance`` or ``speed`` (docs/model.md §6).
+        dt: control period [s]; default depends on the level (:data:`ACTION_LEVELS`).
+        substeps: RK4 steps per control period; default ``ceil(dt / 0.1)``.
+        horizon: episode length [s]; truncation after ``round(horizon/dt)`` steps.
+        paper_as_printed: run (11) and (14) exactly as printed (docs/model.md §3).
+        initial_state: nominal ``(n, 6)`` initial state, or None for the
+            formation slots at speed u_d(0) heading along the path.
+        init_noise: uniform noise added to the nominal initial state at reset.
+        safety_distance: two vessels closer than this [m] collide (terminates).
+        workspace: ``(x_min, x_max, y_min, y_max)`` [m]; None derives a box that
+            holds the whole nominal run with margins of 500 m (x) and 250 m (y).
+        tau_u_max, tau_r_max: actuator limits [m/s², rad/s²]: the ``force``-level
+            action range, and the saturation of the built-in loops at the other levels.
+        psi_max: ``guidance``-level heading command range ±psi_max [rad].
+        max_speed: envelope of |u| and |v| [m/s]; beyond it the formation
+            terminates (the model is not meant for it). Must exceed u_max.
+        max_yaw_rate: envelope of |r| [rad/s]; beyond it the formation terminates.
+        reward: reward weights and scales.
+        channel: the communication channel (:class:`ChannelConfig`, or a
+            mapping of its fields): loss, latency, update rate, TDMA, range,
+            random link failures. The default is the paper's ideal links.
+        current: an ocean current (:class:`Current` or a mapping); its speed
+            plus amplitude must stay below u_min, or a vessel at the slowest
+            allowed speed could not hold its path.
+        sensor_noise: noise on each vessel's measurement of itself
+            (:class:`SensorNoise` or a mapping).
+        los_integral_gain: σ [m/s] of integral LOS in the ``speed`` level's
+            built-in path follower (our extension, Børhaug, Pavlov and
+            Pettersen, CDC 2008): it steers on ``e + σ·e_int`` with
+            ``ė_int = Δ·e/((e + σ·e_int)² + Δ²)``, integrated once per control
+            period, which removes the steady cross-track error a current
+            leaves. 0: the paper's LOS (12). Choose σ above the largest cross
+            current. Only at ``speed``; at the other levels the policy steers.
+    """
+
+    name: str = "custom"
+    n_vessels: int = 3
+    formation: Any = "v"
+    topology: Any = "chain"
+    topology_seed: int = 0
+    allow_unreachable: bool = False
+    vessel: Any = "supply"
+    gains: Gains = field(default_factory=Gains)
+    u_d: Any = 5.0
+    u_min: float = 3.0
+    u_max: float = 7.0
+    action_level: str = "speed"
+    dt: Any = None  # resolved to float: the level's default when None
+    substeps: Any = None  # resolved to int: ceil(dt / 0.1 s) when None
+    horizon: float = 400.0
+    paper_as_printed: bool = False
+    initial_state: Any = None
+    init_noise: Any = field(default_factory=InitNoise)
+    safety_distance: float = 5.0
+    workspace: Any = None
+    tau_u_max: float = 3.0
+    tau_r_max: float = 2.0
+    psi_max: float = math.pi / 2
+    max_speed: float = 14.0
+    max_yaw_rate: float = 1.0
+    reward: Any = field(default_factory=RewardConfig)
+    channel: Any = field(default_factory=ChannelConfig)
+    current: Any = field(default_factory=Current)
+    sensor_noise: Any = field(default_factory=SensorNoise)
+    topology_schedule: Any = ()
+    los_integral_gain: float = 0.0
+
+
+#: The paper's scenario (docs/model.md §5).
+_PAPER: dict[str, Any] = {
+    "name": "paper",
+    "n_vessels": 3,
+    "formation": "paper",
+    "topology": "paper",
+    "initial_state": PAPER_INITIAL_STATE,
+    # The docs/model.md §5 initial state makes vessel_0 and vessel_1 cross paths: under
+    # the paper's controller they pass 0.5-0.7 m apart (as point masses). The
+    # paper does not model collisions, so the check is off in this scenario.
+    "safety_distance": 0.0,
+}
+
+#: Named scenarios: defaults that :func:`make_config` starts from. Besides the
+#: paper's own, three presets put its scenario into the sea the paper is
+#: motivated by (numbers and reasons in the README, "Beyond the paper"):
+#:
+#: * ``acoustic``: underwater acoustic modems. One shared channel in TDMA with
+#:   4 s slots (a short acoustic frame at tens to hundreds of bit/s takes
+#:   seconds), so each vessel updates every 12 s; 1-2 s from sending to
+#:   arrival (frame duration plus sound at ~1500 m/s, decoding); bursty loss
+#:   (Gilbert–Elliott, 20 % of messages lost on average, bad spells of about
+#:   3 messages); 2 km range.
+#: * ``radio``: surface radio. One shared channel in TDMA with 0.5 s slots
+#:   (each vessel updates every 1.5 s), 5 % independent loss, 50 ms latency
+#:   (delivered at the next control instant, as a message never arrives
+#:   before it could), 5 km range.
+#: * ``current``: a 0.5 m/s cross current (towards +y), constant, over ideal links.
+SCENARIOS: dict[str, dict[str, Any]] = {
+    "paper": _PAPER,
+    "acoustic": {
+        **_PAPER,
+        "name": "acoustic",
+        "channel": ChannelConfig(
+            burst=GilbertElliott(p_good_to_bad=0.1, p_bad_to_good=0.35, loss_good=0.05, loss_bad=0.75),
+            latency=1.0,
+            jitter=1.0,
+            tdma_slot=4.0,
+            range=2000.0,
+        ),
+    },
+    "radio": {
+        **_PAPER,
+        "name": "radio",
+        "channel": ChannelConfig(loss=0.05, latency=0.05, tdma_slot=0.5, range=5000.0),
+    },
+    "current": {**_PAPER, "name": "current", "current": Current(speed=0.5, direction=math.pi / 2)},
+}
+
+#: Initial-state noise used when the formation is generated (n differs from the
+#: scenario's): around the slots, ±40 m along, ±20 m across, ±0.3 rad, ±1 m/s.
+GENERATED_INIT_NOISE = InitNoise(x=40.0, y=20.0, psi=0.3, u=1.0)
+
+
+
+def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
+    """The settings of a named scenario with keyword overrides applied (nothing resolved yet).
+
+    Overriding ``n_vessels`` away from the scenario's value without giving
+    ``formation`` / ``initial_state`` switches to a generated ``v`` formation
+    and random initial states around its slots (:data:`GENERATED_INIT_NOISE`),
+    with the default collision check (the ``paper`` scenario turns it off for
+    its own initial state only).
+
+    A mapping given for a field that holds a dataclass (``channel``,
+    ``current``, ``sensor_noise``, ``gains``, ``reward``, ``init_noise``,
+    ``u_d``) updates the scenario's value field by field:
+    ``make_settings("acoustic", channel={"latency": 3.0})`` keeps the rest of
+    the acoustic channel. Giving ``topology_schedule`` without ``topology``
+    replaces the scenario's fixed graph by the schedule.
+
+    Raises:
+        ConfigError: unknown scenario or key.
+    """
+    if not isinstance(scenario, str) or scenario not in SCENARIOS:
+        raise ConfigError(f"unknown scenario {scenario!r}; known scenarios: {sorted(SCENARIOS)}")
+    base = dict(SCENARIOS[scenario])
+    valid = {f.name for f in dataclasses.fields(Settings)}
+    unknown = sorted(set(overrides) - valid)
+    if unknown:
+        raise ConfigError(f"unknown override(s) {unknown}; valid keys: {sorted(valid)}")
+    n_default = base.get("n_vessels", 3)
+    if "n_vessels" in overrides and overrides["n_vessels"] != n_default:
+        if "formation" not in overrides:
+            base["formation"] = "v"
+        if "initial_state" not in overrides:
+            base["initial_state"] = None
+            base.pop("safety_distance", None)  # the scenario's value belongs to its own initial state
+            base.setdefault("init_noise", GENERATED_INIT_NOISE)
+            if isinstance(base["init_noise"], InitNoise) and base["init_noise"].is_zero:
+                base["init_noise"] = GENERATED_INIT_NOISE
+    if overrides.get("topology_schedule") and "topology" not in overrides:
+        base["topology"] = None
+    defaults = {f.name: f for f in dataclasses.fields(Settings)}
+    for key, value in overrides.items():
+        current = base.get(key)
+        factory = defaults[key].default_factory
+        if current is None and callable(factory):
+            current = factory()
+        if isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
+            # unknown keys are reported when ScenarioConfig builds the merged mapping
+            base[key] = {**{f.name: getattr(current, f.name) for f in dataclasses.fields(current)}, **value}
+        else:
+            base[key] = value
+    return Settings(**base)
