@@ -47,8 +47,9 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import BatchPolicy
+from marine_formation_env.actions import normalized_actions
 from marine_formation_env.control import consensus_speed, integral_los_rate, los_angle, path_following_inputs
-from marine_formation_env.core import ObservationLayout, normalized_actions
+from marine_formation_env.observations import ObservationLayout
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["ReferencePolicy"]

@@ -193,7 +193,8 @@ def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
     vessel ODE and, below the ``force`` level, the inner controllers), for
     one formation of three vessels, divided by three.
     """
-    from marine_formation_env.core import FormationCore, physical_commands
+    from marine_formation_env.actions import physical_commands
+    from marine_formation_env.core import FormationCore
     from marine_formation_env.dynamics import rk4_step
     from marine_formation_env.scenarios import make_config
 

@@ -26,7 +26,7 @@ from numba.extending import register_jitable
 from marine_formation_env import control, dynamics, rules
 from marine_formation_env.rules import AGE, COORDINATION, LINK, OWN_SIZE, SLOT_SIZE, VELOCITY
 
-__all__ = ["LEVEL_CODES", "coefficients", "step_kernel"]
+__all__ = ["LEVEL_CODES", "StepKernel", "coefficients", "step_kernel"]
 
 LEVEL_CODES = {"force": 0, "guidance": 1, "speed": 2}
 
@@ -301,3 +301,105 @@ PARALLEL_FROM = 64
 def step_kernel(n_formations: int) -> Any:
     """The kernel to use for ``n_formations`` formations (threads only pay off for many)."""
     return _parallel if n_formations >= PARALLEL_FROM else _serial
+
+
+class StepKernel:
+    """The compiled step of one :class:`~marine_formation_env.core.FormationCore`: its arguments packed once.
+
+    Everything the kernel needs that does not change between steps (the
+    vessel, the gains, the level, the limits, the reward weights, the
+    observation bounds and slot geometry) is packed at construction;
+    :meth:`run` passes the per-step arrays.
+    """
+
+    def __init__(
+        self,
+        config: Any,
+        num_envs: int,
+        slot_index: np.ndarray,
+        slot_mask: np.ndarray,
+        obs_low: np.ndarray,
+        obs_high: np.ndarray,
+    ) -> None:
+        coeffs, gains = coefficients(config)
+        w = config.reward
+        self.config = config
+        self.kernel = step_kernel(num_envs)
+        self.dims = (num_envs, config.n_vessels, obs_low.shape[0])
+        self.model = (
+            LEVEL_CODES[config.action_level],
+            coeffs,
+            gains,
+            config.paper_as_printed,
+            config.dt,
+            config.substeps,
+            config.tau_u_max,
+            config.tau_r_max,
+            np.array(config.current.coefficients),
+        )
+        self.geometry = (np.ascontiguousarray(config.formation), slot_index, slot_mask)
+        self.limits = (
+            obs_low,
+            obs_high,
+            np.array([w.cross_track, w.heading, w.coordination, w.speed, w.effort]),
+            np.array([w.sigma_cross_track, w.sigma_heading, w.sigma_coordination, w.sigma_speed]),
+        )
+        self.tail = (
+            w.total_weight if w.terminal_penalty else 0.0,
+            np.array(config.workspace),
+            config.safety_distance,
+            config.max_speed,
+            config.max_yaw_rate,
+        )
+
+    def run(
+        self,
+        state: np.ndarray,
+        commands: np.ndarray,
+        last_u_c: np.ndarray,
+        time0: np.ndarray,
+        steer_dy: np.ndarray,
+        time1: np.ndarray,
+        actions: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Advance ``state`` ``(B, N, 6)`` in place by one control period.
+
+        Args:
+            commands: ``(B, N, 2)`` physical commands: (τ_u, τ_r) | (u_c, ψ_d) | (u_c, 0).
+            last_u_c: ``(B, N)`` the previous period's u_c (first-order hold).
+            time0, time1: ``(B,)`` time at the start and at the end of the period [s].
+            steer_dy: ``(B, N)`` the path offset the built-in LOS steers to.
+            actions: ``(B, N, A)`` the clipped normalized actions (effort term).
+
+        Returns:
+            ``(observation (B, N, D) float32, components (6, B, N), reward (B, N),
+            flags (B, 2): collision, out_of_bounds)``.
+        """
+        b, n, dim = self.dims
+        cfg = self.config
+        obs = np.empty((b, n, dim), dtype=np.float32)
+        comps = np.empty((6, b, n))
+        flags = np.empty((b, 2), dtype=np.bool_)
+        reward = np.empty((b, n))
+        self.kernel(
+            state,
+            commands,
+            last_u_c,
+            *self.model,
+            time0,
+            steer_dy,
+            *self.geometry,
+            np.asarray(cfg.u_d.value(time1), dtype=float),
+            np.asarray(cfg.u_d.rate(time1), dtype=float),
+            cfg.horizon - time1,
+            *self.limits,
+            actions,
+            *self.tail,
+            obs,
+            comps,
+            reward,
+            flags,
+            np.empty((b, n)),
+            np.empty((b, n)),
+        )
+        return obs, comps, reward, flags

@@ -1,15 +1,23 @@
-"""The batched simulation: the only place that holds step logic.
+"""The batched simulation: the state of ``B`` formations of ``N`` vessels and its step.
 
-:class:`FormationCore` advances ``B`` independent formations of ``N`` vessels
-at once. It owns the state ``(B, N, 6)`` and does, per control period:
-map the normalized actions to physical commands, integrate ``substeps`` RK4
+:class:`FormationCore` owns the state ``(B, N, 6)``, the time and the step
+count, and does, per control period: map the normalized actions to physical
+commands (:mod:`~marine_formation_env.actions`), integrate ``substeps`` RK4
 steps of the closed loop (the built-in inner controllers of the action level
-are part of the vector field, so they act at every RK4 stage), then compute the
-masked observations, rewards, terminations and truncations as arrays.
+are part of the vector field, so they act at every RK4 stage), then compute
+the masked observations, rewards, terminations and truncations as arrays, with
+the per-element rules of :mod:`~marine_formation_env.rules`. The numba backend
+(:mod:`~marine_formation_env._numba`) runs the same step as one fused kernel.
 
-It holds no random generator: initial states are sampled from a generator the
-caller passes in (:meth:`FormationCore.sample_initial_state`). Every front end
-(PettingZoo env, gymnasium views, vector env) is a thin view of this class.
+Everything else has its own home: the observation layout and bounds
+(:mod:`~marine_formation_env.observations`), the action maps and spaces
+(:mod:`~marine_formation_env.actions`), the backend choice
+(:mod:`~marine_formation_env.backends`), the initial-state draws
+(:func:`~marine_formation_env.scenarios.sample_initial_state`, from a
+generator the caller passes in: the core holds none), the channel
+(:mod:`~marine_formation_env.channel`) and the sensor noise
+(:mod:`~marine_formation_env.disturbances`). Every front end (PettingZoo env,
+gymnasium views, vector env) is a thin view of this class.
 
 Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, docs/model.md §7)::
 
@@ -25,9 +33,6 @@ Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, docs/model.md 
           2 ẋ_j − ẋ_i                        [m/s]   (0 if no link)
           3 age of that data                 [s]     (0: ideal links)
 
-Slots are ordered relative to ``j`` so that one shared policy sees "the next
-vessel", "the one after" and so on in the same place for every vessel.
-
 With a non-ideal channel, switching topologies or sensor noise
 (``not config.ideal_observations``), a :class:`~marine_formation_env.channel.LinkChannel`
 sits between the vessels: the slots then hold the last message received from
@@ -39,16 +44,15 @@ message (module :mod:`marine_formation_env.channel`). With a current, ``u`` and
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
+from marine_formation_env.actions import map_actions
+from marine_formation_env.backends import resolve_backend
 from marine_formation_env.channel import LinkChannel
 from marine_formation_env.control import heading_tracking_inputs, integral_los_rate, path_following_inputs
 from marine_formation_env.disturbances import SensorNoiseSource
@@ -66,11 +70,10 @@ from marine_formation_env.dynamics import (
     wrap_angle,
 )
 from marine_formation_env.errors import float_array
+from marine_formation_env.observations import ObservationLayout, observation_bounds
 from marine_formation_env.rules import (
     COORDINATION,
     LINK,
-    OWN_FEATURES,
-    SLOT_FEATURES,
     VELOCITY,
     along_track,
     cost_term,
@@ -80,46 +83,12 @@ from marine_formation_env.rules import (
     slot_differences,
     terminal_term,
 )
-from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.scenarios import ScenarioConfig, min_separation
 from marine_formation_env.streams import channel_streams
 
-__all__ = [
-    "OWN_FEATURES",
-    "REWARD_COMPONENTS",
-    "SLOT_FEATURES",
-    "FormationCore",
-    "ObservationLayout",
-    "StepOutput",
-    "reset_output",
-]
+__all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
 
 REWARD_COMPONENTS = ("cross_track", "heading", "coordination", "speed", "effort", "terminal")
-
-
-@dataclass(frozen=True)
-class ObservationLayout:
-    """Index arithmetic of the per-agent observation vector (see module docstring)."""
-
-    n_vessels: int
-
-    own: int = len(OWN_FEATURES)
-    slot: int = len(SLOT_FEATURES)
-
-    @property
-    def dim(self) -> int:
-        """Length of one agent's observation."""
-        return self.own + self.slot * (self.n_vessels - 1)
-
-    def slot_vessels(self, j: int) -> list[int]:
-        """The vessel held in each slot of vessel ``j``'s observation."""
-        n = self.n_vessels
-        return [(j + k + 1) % n for k in range(n - 1)]
-
-    def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Split ``(..., dim)`` observations into own ``(..., 7)`` and slots ``(..., N−1, 4)``."""
-        own = obs[..., : self.own]
-        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.n_vessels - 1, self.slot)
-        return own, slots
 
 
 @dataclass
@@ -172,59 +141,6 @@ def reset_output(observation: np.ndarray, has_commanded_speed: bool) -> StepOutp
     )
 
 
-def physical_commands(config: ScenarioConfig, actions: np.ndarray) -> dict[str, np.ndarray]:
-    """Map normalized actions ``(..., A)`` (clipped to [−1, 1]) to the level's physical commands.
-
-    * ``force``: ``τ_u = a₀·tau_u_max`` [m/s²], ``τ_r = a₁·tau_r_max`` [rad/s²].
-    * ``guidance``: ``u_c = U_min + (a₀+1)/2·(U_max−U_min)`` [m/s], ``ψ_d = a₁·psi_max`` [rad].
-    * ``speed``: ``u_c`` as above.
-    """
-    return _map_actions(config, np.clip(actions, -1.0, 1.0))
-
-
-def _map_actions(cfg: ScenarioConfig, a: np.ndarray) -> dict[str, np.ndarray]:
-    """:func:`physical_commands` of actions already inside [−1, 1]."""
-    if cfg.action_level == "force":
-        return {"tau_u": a[..., 0] * cfg.tau_u_max, "tau_r": a[..., 1] * cfg.tau_r_max}
-    u_c = cfg.u_min + 0.5 * (a[..., 0] + 1.0) * (cfg.u_max - cfg.u_min)
-    if cfg.action_level == "guidance":
-        return {"u_c": u_c, "psi_d": a[..., 1] * cfg.psi_max}
-    return {"u_c": u_c}
-
-
-def normalized_actions(config: ScenarioConfig, **commands: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`physical_commands` (clipped to [−1, 1]), shape ``(..., A)``."""
-    cfg = config
-    if cfg.action_level == "force":
-        cols = [commands["tau_u"] / cfg.tau_u_max, commands["tau_r"] / cfg.tau_r_max]
-    else:
-        cols = [2.0 * (np.asarray(commands["u_c"]) - cfg.u_min) / (cfg.u_max - cfg.u_min) - 1.0]
-        if cfg.action_level == "guidance":
-            cols.append(np.asarray(commands["psi_d"]) / cfg.psi_max)
-    return np.clip(np.stack(np.broadcast_arrays(*cols), axis=-1), -1.0, 1.0)
-
-
-BACKENDS = ("auto", "numpy", "numba")
-
-
-def resolve_backend(backend: str) -> str:
-    """``"numpy"`` or ``"numba"`` for a requested backend (``"auto"``: numba if installed).
-
-    The environment variable ``MARINE_FORMATION_BACKEND`` overrides ``"auto"``.
-    """
-    if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; choose one of {list(BACKENDS)}")
-    if backend == "auto":
-        backend = os.environ.get("MARINE_FORMATION_BACKEND", "auto")
-        if backend not in BACKENDS:
-            raise ValueError(f"MARINE_FORMATION_BACKEND={backend!r}; choose one of {list(BACKENDS)}")
-    if backend == "auto":
-        return "numba" if importlib.util.find_spec("numba") is not None else "numpy"
-    if backend == "numba" and importlib.util.find_spec("numba") is None:
-        raise ImportError("backend 'numba' needs numba: pip install 'marine-formation-env[fast]'")
-    return backend
-
-
 class FormationCore:
     """``B`` formations of ``N`` vessels stepped together (see module docstring).
 
@@ -263,12 +179,10 @@ class FormationCore:
         n = self.n
         self._dx = np.ascontiguousarray(config.formation[:, 0])
         self._dy = np.ascontiguousarray(config.formation[:, 1])
+        self._steer_dy_plain = np.ascontiguousarray(np.broadcast_to(self._dy, (self.num_envs, config.n_vessels)))
         self._slot_index = np.array([self.layout.slot_vessels(j) for j in range(n)], dtype=np.intp).reshape(n, n - 1)
         self._slot_mask = config.graph.adjacency[np.arange(n)[:, None], self._slot_index].astype(float)
-        self._pairs = np.triu_indices(n, k=1)
-        self.obs_low, self.obs_high = self._observation_bounds()
-        self._noise = config.init_noise.as_array()
-        self._noise_free = config.init_noise.is_zero
+        self.obs_low, self.obs_high = observation_bounds(config)
         self.state = np.zeros((self.num_envs, n, 6))
         self.time = np.zeros(self.num_envs)
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
@@ -291,42 +205,12 @@ class FormationCore:
         self._measured: np.ndarray | None = None  # with sensor noise only
         self._los_sigma = config.los_integral_gain
         self.los_integral = np.zeros((self.num_envs, n))  # e_int of integral LOS [s] (speed level)
-        self._kernel_args: tuple[Any, ...] | None = None
+        self._kernel: Any = None
         if self.backend == "numba":
             from marine_formation_env import _numba
 
-            coeffs, gains = _numba.coefficients(config)
-            w = config.reward
-            self._kernel = _numba.step_kernel(self.num_envs)
-            self._kernel_args = (
-                _numba.LEVEL_CODES[config.action_level],
-                coeffs,
-                gains,
-                config.paper_as_printed,
-                config.dt,
-                config.substeps,
-                config.tau_u_max,
-                config.tau_r_max,
-                np.array(config.current.coefficients),
-            )
-            self._kernel_steer_dy = np.ascontiguousarray(np.broadcast_to(self._dy, (self.num_envs, n)))
-            self._kernel_geometry = (
-                np.ascontiguousarray(config.formation),
-                self._slot_index,
-                self._slot_mask,
-            )
-            self._kernel_limits = (
-                self.obs_low,
-                self.obs_high,
-                np.array([w.cross_track, w.heading, w.coordination, w.speed, w.effort]),
-                np.array([w.sigma_cross_track, w.sigma_heading, w.sigma_coordination, w.sigma_speed]),
-            )
-            self._kernel_tail = (
-                w.total_weight if w.terminal_penalty else 0.0,
-                np.array(config.workspace),
-                config.safety_distance,
-                config.max_speed,
-                config.max_yaw_rate,
+            self._kernel = _numba.StepKernel(
+                config, self.num_envs, self._slot_index, self._slot_mask, self.obs_low, self.obs_high
             )
 
     @property
@@ -335,76 +219,7 @@ class FormationCore:
         instant: the state plus sensor noise (the state itself without noise)."""
         return self.state if self._measured is None else self._measured
 
-    def _observation_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per-agent observation bounds ``(low, high)`` (float32, see :meth:`observation_space`)."""
-        cfg = self.config
-        x_lo, x_hi, y_lo, y_hi = cfg.workspace
-        d = cfg.formation
-        rate = max(2.0 * np.pi * cfg.u_d.amplitude / cfg.u_d.period, 0.1)
-        own_high = [
-            max(abs(y_lo), abs(y_hi)) + float(np.max(np.abs(d[:, 1]))),  # e_j
-            np.pi,  # ψ
-            cfg.max_speed,  # u
-            cfg.max_speed,  # v
-            cfg.max_yaw_rate,  # r
-            cfg.u_max,  # u_d ∈ [U_min + a, U_max − a] by (19)
-            rate,  # u̇_d
-        ]
-        own_low = [-own_high[0], -np.pi, -cfg.max_speed, -cfg.max_speed, -cfg.max_yaw_rate, cfg.u_min, -rate]
-        dtheta = (x_hi - x_lo) + float(np.ptp(d[:, 0]))
-        dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
-        slot_low = [0.0, -dtheta, -dxdot, 0.0]
-        slot_high = [1.0, dtheta, dxdot, cfg.horizon]
-        low = np.array(own_low + slot_low * (self.n - 1), dtype=np.float32)
-        high = np.array(own_high + slot_high * (self.n - 1), dtype=np.float32)
-        return low, high
-
-    def observation_space(self, joint: bool = False) -> spaces.Box:
-        """One vessel's observation space (``joint``: the N vessels' concatenated).
-
-        Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|;
-        ψ in [−π, π]; u, v in ±max_speed; r in ±max_yaw_rate; u_d in
-        [U_min, U_max]; u̇_d within the profile's range (at least ±0.1 m/s²); link bits in
-        [0, 1]; coordination differences within the workspace's x-extent plus the
-        spread of D_x; ẋ differences within ±2√2·max_speed; ages in
-        [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
-        envelope terminates, so only its last observation can reach past the
-        bounds, and it is clipped to them.
-        """
-        if joint:
-            return spaces.Box(np.tile(self.obs_low, self.n), np.tile(self.obs_high, self.n), dtype=np.float32)
-        return spaces.Box(self.obs_low, self.obs_high, dtype=np.float32)
-
-    def action_space(self, joint: bool = False) -> spaces.Box:
-        """One vessel's action space ``Box(-1, 1, (A,))`` (``joint``: ``(N·A,)``)."""
-        size = self.n * self.action_dim if joint else self.action_dim
-        return spaces.Box(-1.0, 1.0, (size,), dtype=np.float32)
-
     # ------------------------------------------------------------------ reset
-    def sample_initial_state(self, rng: np.random.Generator) -> np.ndarray:
-        """Nominal initial state plus uniform ``init_noise``, shape ``(N, 6)``.
-
-        Draws are rejected (up to 100 times) while two vessels start closer than
-        twice the safety distance.
-        """
-        cfg = self.config
-        if self._noise_free:
-            return np.array(cfg.initial_state)
-        for _ in range(100):
-            candidate = cfg.initial_state + rng.uniform(-1.0, 1.0, size=cfg.initial_state.shape) * self._noise
-            if self._min_separation(candidate[None])[0] > 2.0 * cfg.safety_distance:
-                return candidate
-        raise RuntimeError(
-            f"could not draw an initial state with vessels more than {2 * cfg.safety_distance} m apart "
-            f"in 100 tries; reduce init_noise ({cfg.init_noise}) or safety_distance"
-        )
-
-    def sample_initial_states(self, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-        """One initial state per generator, ``(len(rngs), N, 6)`` (see :meth:`sample_initial_state`)."""
-        if self._noise_free:
-            return np.broadcast_to(self.config.initial_state, (len(rngs), self.n, 6)).copy()
-        return np.stack([self.sample_initial_state(rng) for rng in rngs])
-
     def seed_channel(self, seeds: Sequence[int | None], env_ids: np.ndarray | None = None) -> None:
         """Seed the channel stream (loss, delays, failures, sensor noise) of formations ``env_ids``.
 
@@ -488,14 +303,14 @@ class FormationCore:
             bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
         clipped = np.clip(actions, -1.0, 1.0)
-        commands = _map_actions(cfg, clipped)
+        commands = map_actions(cfg, clipped)
         if self._fresh.any():
             fresh = self._fresh
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
             self._fresh[:] = False
         e_start = self.state[..., Y] - self._dy if self._los_sigma > 0 else None
-        if self._kernel_args is not None:
+        if self._kernel is not None:
             out = self._step_compiled(clipped, commands)
         else:
             rhs = self.closed_loop(commands)
@@ -523,7 +338,7 @@ class FormationCore:
         """
         if self._los_sigma > 0:
             return self._dy - self._los_sigma * self.los_integral  # type: ignore[no-any-return]
-        return self._dy
+        return self._steer_dy_plain
 
     def _step_compiled(self, actions: np.ndarray, commands: dict[str, np.ndarray]) -> StepOutput:
         """The same step as the numpy path, in one fused numba kernel (``backend="numba"``)."""
@@ -536,34 +351,11 @@ class FormationCore:
             cmd[..., 0] = commands["u_c"]
             if cfg.action_level == "guidance":
                 cmd[..., 1] = commands["psi_d"]
-        time0, steer_dy = self.time, self._kernel_steer_dy if self._los_sigma == 0 else self._steer_dy()
+        time0, steer_dy = self.time, self._steer_dy()
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
-        obs = np.empty((b, n, self.layout.dim), dtype=np.float32)
-        comps = np.empty((len(REWARD_COMPONENTS), b, n))
-        flags = np.empty((b, 2), dtype=np.bool_)
-        reward = np.empty((b, n))
-        assert self._kernel_args is not None
-        self._kernel(
-            self.state,
-            cmd,
-            self._last_u_c,
-            *self._kernel_args,
-            time0,
-            steer_dy,
-            *self._kernel_geometry,
-            np.asarray(cfg.u_d.value(self.time), dtype=float),
-            np.asarray(cfg.u_d.rate(self.time), dtype=float),
-            cfg.horizon - self.time,
-            *self._kernel_limits,
-            actions,
-            *self._kernel_tail,
-            obs,
-            comps,
-            reward,
-            flags,
-            np.empty((b, n)),
-            np.empty((b, n)),
+        obs, comps, reward, flags = self._kernel.run(
+            self.state, cmd, self._last_u_c, time0, steer_dy, self.time, actions
         )
         if self.channel is not None:  # the kernel's slots are those of ideal links
             self._sense(np.arange(b))
@@ -687,11 +479,6 @@ class FormationCore:
         s[..., PSI] = wrap_angle(s[..., PSI])
         return np.concatenate([s.reshape(self.num_envs, -1), self.time[:, None]], axis=1).astype(np.float32)
 
-    def _min_separation(self, state: np.ndarray) -> np.ndarray:
-        i, j = self._pairs
-        d = np.hypot(state[:, i, X] - state[:, j, X], state[:, i, Y] - state[:, j, Y])
-        return d.min(axis=1)
-
     def _outputs(self, actions: np.ndarray, u_c: np.ndarray | None) -> StepOutput:
         cfg, w = self.config, self.config.reward
         s = self.state
@@ -713,7 +500,7 @@ class FormationCore:
             axis=1,
         )
         out_of_bounds |= ~np.all(np.isfinite(s), axis=(1, 2))  # an unstable state ends the episode too
-        collision = self._min_separation(s) < cfg.safety_distance
+        collision = min_separation(s) < cfg.safety_distance
         terminated = out_of_bounds | collision
         rate = w.total_weight if w.terminal_penalty else 0.0
         components["terminal"] = np.broadcast_to(

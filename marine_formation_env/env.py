@@ -9,10 +9,12 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.frontend import Rendering, one_entry, read_reset, resolve_config, vessel_infos
+from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
 
@@ -231,8 +233,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self.possible_agents = [f"vessel_{j}" for j in range(n)]
         self.agents: list[str] = []
         self._index = {agent: j for j, agent in enumerate(self.possible_agents)}
-        self._observation_space = self.core.observation_space()
-        self._action_space = self.core.action_space()
+        self._observation_space = observation_space(self.config)
+        self._action_space = action_space(self.config)
         self.state_space = spaces.Box(-np.inf, np.inf, (n * 6 + 1,), dtype=np.float32)
         self.np_random, self.np_random_seed = seeding.np_random(None)
         self._rendering = Rendering(self.config, render_mode)
@@ -282,7 +284,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             self.np_random, self.np_random_seed = seeding.np_random(request.seeds[0])
         initial = request.initial_state
         if initial is None:
-            initial = self.core.sample_initial_state(self.np_random)
+            initial = sample_initial_state(self.config, self.np_random)
         self.core.seed_channel(request.channel_seeds)
         obs = self.core.reset(initial)[0]
         self.agents = list(self.possible_agents)

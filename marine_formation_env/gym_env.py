@@ -28,11 +28,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import Rendering, formation_infos, one_entry, read_reset, resolve_config
+from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationGymEnv"]
 
@@ -59,8 +61,8 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self.config: ScenarioConfig = resolve_config(scenario, overrides)
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         self.render_mode = render_mode
-        self.observation_space = self.core.observation_space(joint=True)
-        self.action_space = self.core.action_space(joint=True)
+        self.observation_space = observation_space(self.config, joint=True)
+        self.action_space = action_space(self.config, joint=True)
         self._rendering = Rendering(self.config, render_mode)
         self._done = True
 
@@ -75,7 +77,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         super().reset(seed=request.seeds[0])
         initial = request.initial_state
         if initial is None:
-            initial = self.core.sample_initial_state(self.np_random)
+            initial = sample_initial_state(self.config, self.np_random)
         self.core.seed_channel(request.channel_seeds)
         obs = self.core.reset(initial)
         self._done = False

@@ -15,7 +15,7 @@ checks that the two backends still agree.
 
 Observation layout of vessel ``j`` (``OWN_SIZE + SLOT_SIZE·(N−1)`` entries):
 the own part (:data:`OWN_FEATURES`), then one slot (:data:`SLOT_FEATURES`) per
-other vessel, in the order of :meth:`~marine_formation_env.core.ObservationLayout.slot_vessels`.
+other vessel, in the order of :meth:`~marine_formation_env.observations.ObservationLayout.slot_vessels`.
 """
 
 from __future__ import annotations

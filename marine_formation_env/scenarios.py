@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -60,7 +60,10 @@ __all__ = [
     "initial_state_problem",
     "make_config",
     "make_settings",
+    "min_separation",
     "resolve",
+    "sample_initial_state",
+    "sample_initial_states",
 ]
 
 
@@ -548,6 +551,41 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
                 f"{config.safety_distance:g} m; the episode would end at its first step"
             )
     return None
+
+
+def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np.ndarray:
+    """The nominal initial state plus uniform ``init_noise``, shape ``(N, 6)``, drawn from ``rng``.
+
+    Draws are rejected (up to 100 times) while two vessels start closer than
+    twice the safety distance.
+
+    Raises:
+        RuntimeError: no acceptable draw in 100 tries (names the noise and the distance).
+    """
+    if config.init_noise.is_zero:
+        return np.array(config.initial_state)
+    half_widths = config.init_noise.as_array()
+    for _ in range(100):
+        candidate = config.initial_state + rng.uniform(-1.0, 1.0, size=config.initial_state.shape) * half_widths
+        if min_separation(candidate[None])[0] > 2.0 * config.safety_distance:
+            return candidate
+    raise RuntimeError(
+        f"could not draw an initial state with vessels more than {2 * config.safety_distance} m apart "
+        f"in 100 tries; reduce init_noise ({config.init_noise}) or safety_distance"
+    )
+
+
+def sample_initial_states(config: ScenarioConfig, rngs: Sequence[np.random.Generator]) -> np.ndarray:
+    """One initial state per generator, ``(len(rngs), N, 6)`` (see :func:`sample_initial_state`)."""
+    if config.init_noise.is_zero:
+        return np.broadcast_to(config.initial_state, (len(rngs), config.n_vessels, 6)).copy()
+    return np.stack([sample_initial_state(config, rng) for rng in rngs])
+
+
+def min_separation(state: np.ndarray) -> np.ndarray:
+    """``(B,)`` the smallest distance [m] between two vessels of each formation of ``state`` ``(B, N, 6)``."""
+    i, j = np.triu_indices(state.shape[1], k=1)
+    return np.hypot(state[:, i, 0] - state[:, j, 0], state[:, i, 1] - state[:, j, 1]).min(axis=1)  # type: ignore[no-any-return]
 
 
 def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:

@@ -46,11 +46,13 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import Rendering, formation_infos, read_reset, resolve_config, vessel_infos
+from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode
-from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.scenarios import ScenarioConfig, sample_initial_states
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv"]
 
@@ -102,8 +104,8 @@ class MarineFormationVectorEnv(VectorEnv):
         self.render_mode = render_mode
         b, joint = self.num_formations, layout == "joint"
         self.num_envs = b if joint else b * self.n_vessels
-        self.single_observation_space = self.core.observation_space(joint)
-        self.single_action_space = self.core.action_space(joint)
+        self.single_observation_space = observation_space(self.config, joint)
+        self.single_action_space = action_space(self.config, joint)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self._rngs = [seeding.np_random(None)[0] for _ in range(b)]
@@ -134,7 +136,7 @@ class MarineFormationVectorEnv(VectorEnv):
         ]
         initial = request.initial_state
         if initial is None:
-            initial = self.core.sample_initial_states(self._rngs)
+            initial = sample_initial_states(self.config, self._rngs)
         self.core.seed_channel(request.channel_seeds)
         self.core.reset(initial)
         self._needs_reset[:] = False
@@ -178,7 +180,7 @@ class MarineFormationVectorEnv(VectorEnv):
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
-        return self.core.reset(self.core.sample_initial_states([self._rngs[k] for k in ids]), env_ids=ids)
+        return self.core.reset(sample_initial_states(self.config, [self._rngs[k] for k in ids]), env_ids=ids)
 
     # ---------------------------------------------------------------- layouts
     def _layout_obs(self, obs: np.ndarray) -> np.ndarray:

@@ -18,8 +18,9 @@ from pettingzoo.test import parallel_api_test
 import marine_formation_env
 from baselines import ReferencePolicy
 from marine_formation_env.channel import BlockStream, ChannelConfig, GilbertElliott, channel_streams
-from marine_formation_env.core import FormationCore, ObservationLayout
+from marine_formation_env.core import FormationCore
 from marine_formation_env.graph import CommGraph
+from marine_formation_env.observations import ObservationLayout
 from marine_formation_env.scenarios import ConfigError, make_config
 from marine_formation_env.vector import MarineFormationVectorEnv
 

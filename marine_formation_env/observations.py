@@ -1,0 +1,95 @@
+"""What a vessel observes: the layout of its observation vector and its bounds.
+
+The entries themselves are computed by the core with the rules of
+:mod:`marine_formation_env.rules`; this module says where each one sits
+(:class:`ObservationLayout`) and what range it can take (:func:`observation_bounds`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = ["ObservationLayout", "observation_bounds", "observation_space"]
+
+
+@dataclass(frozen=True)
+class ObservationLayout:
+    """Index arithmetic of the per-agent observation vector.
+
+    Vessel ``j``'s observation is its own part (:data:`~marine_formation_env.rules.OWN_FEATURES`)
+    followed by one slot (:data:`~marine_formation_env.rules.SLOT_FEATURES`) per
+    other vessel ``i = (j + k + 1) mod N``, ``k = 0 … N−2``: ordered relative to
+    ``j``, so one shared policy sees "the next vessel", "the one after" and so
+    on in the same place for every vessel.
+    """
+
+    n_vessels: int
+
+    own: int = len(OWN_FEATURES)
+    slot: int = len(SLOT_FEATURES)
+
+    @property
+    def dim(self) -> int:
+        """Length of one agent's observation."""
+        return self.own + self.slot * (self.n_vessels - 1)
+
+    def slot_vessels(self, j: int) -> list[int]:
+        """The vessel held in each slot of vessel ``j``'s observation."""
+        n = self.n_vessels
+        return [(j + k + 1) % n for k in range(n - 1)]
+
+    def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Split ``(..., dim)`` observations into own ``(..., 7)`` and slots ``(..., N−1, 4)``."""
+        own = obs[..., : self.own]
+        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.n_vessels - 1, self.slot)
+        return own, slots
+
+
+def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Per-agent observation bounds ``(low, high)``, float32 (see :func:`observation_space`)."""
+    cfg = config
+    x_lo, x_hi, y_lo, y_hi = cfg.workspace
+    d = cfg.formation
+    rate = max(2.0 * np.pi * cfg.u_d.amplitude / cfg.u_d.period, 0.1)
+    own_high = [
+        max(abs(y_lo), abs(y_hi)) + float(np.max(np.abs(d[:, 1]))),  # e_j
+        np.pi,  # ψ
+        cfg.max_speed,  # u
+        cfg.max_speed,  # v
+        cfg.max_yaw_rate,  # r
+        cfg.u_max,  # u_d ∈ [U_min + a, U_max − a] by (19)
+        rate,  # u̇_d
+    ]
+    own_low = [-own_high[0], -np.pi, -cfg.max_speed, -cfg.max_speed, -cfg.max_yaw_rate, cfg.u_min, -rate]
+    dtheta = (x_hi - x_lo) + float(np.ptp(d[:, 0]))
+    dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
+    slot_low = [0.0, -dtheta, -dxdot, 0.0]
+    slot_high = [1.0, dtheta, dxdot, cfg.horizon]
+    low = np.array(own_low + slot_low * (cfg.n_vessels - 1), dtype=np.float32)
+    high = np.array(own_high + slot_high * (cfg.n_vessels - 1), dtype=np.float32)
+    return low, high
+
+
+def observation_space(config: ScenarioConfig, joint: bool = False) -> spaces.Box:
+    """One vessel's observation space (``joint``: the N vessels' concatenated).
+
+    Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|;
+    ψ in [−π, π]; u, v in ±max_speed; r in ±max_yaw_rate; u_d in
+    [U_min, U_max]; u̇_d within the profile's range (at least ±0.1 m/s²); link bits in
+    [0, 1]; coordination differences within the workspace's x-extent plus the
+    spread of D_x; ẋ differences within ±2√2·max_speed; ages in
+    [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
+    envelope terminates, so only its last observation can reach past the
+    bounds, and it is clipped to them.
+    """
+    low, high = observation_bounds(config)
+    if joint:
+        n = config.n_vessels
+        return spaces.Box(np.tile(low, n), np.tile(high, n), dtype=np.float32)
+    return spaces.Box(low, high, dtype=np.float32)
