@@ -16,16 +16,54 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["TEMP_MARK", "atomic_path", "atomic_write_bytes", "atomic_write_text", "check_writable"]
+__all__ = [
+    "TEMP_MARK",
+    "atomic_path",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "check_writable",
+    "fsync_folder",
+    "temporary_beside",
+]
 
 #: Part of every temporary file's name (``.NAME.<random>.tmp<suffix>``), for clean-ups.
 TEMP_MARK = ".tmp"
 
 
 def _umask() -> int:
-    mask = os.umask(0)
+    mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+#: The process's umask, read once: temporary files get the mode ``open()`` would give the final file.
+_FILE_MODE = 0o666 & ~_umask()
+
+
+def temporary_beside(path: str | os.PathLike[str]) -> Path:
+    """A new, empty temporary file in ``path``'s folder, named ``.NAME.<random>.tmp<suffix>``.
+
+    It has the permissions ``open()`` would give ``path`` (not mkstemp's 0600),
+    so renaming it over ``path`` changes nothing but the content.
+    """
+    target = Path(path)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f"{TEMP_MARK}{target.suffix}", dir=target.parent)
+    try:
+        with contextlib.suppress(AttributeError, OSError):  # no fchmod on Windows
+            os.fchmod(fd, _FILE_MODE)
+    finally:
+        os.close(fd)
+    return Path(name)
+
+
+def fsync_folder(folder: str | os.PathLike[str]) -> None:
+    """Make a rename in ``folder`` durable (a no-op where folders cannot be opened, e.g. Windows)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 @contextlib.contextmanager
@@ -44,24 +82,16 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
             np.savez_compressed(tmp, **arrays)
     """
     target = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f"{TEMP_MARK}{target.suffix}", dir=target.parent)
-    os.close(fd)
-    tmp = Path(name)
+    tmp = temporary_beside(target)
     try:
         yield tmp
         with open(tmp, "rb+") as handle:  # the content reaches the disk before the rename makes it visible
             os.fsync(handle.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would outlive the rename
         os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    with contextlib.suppress(OSError):  # the rename itself reaches the disk (POSIX; not possible on Windows)
-        dir_fd = os.open(target.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
+    fsync_folder(target.parent)
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:

@@ -33,14 +33,13 @@ import os
 import pickle
 import re
 import shutil
-import tempfile
 import zipfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from marine_formation_env.atomic import TEMP_MARK, atomic_path
+from marine_formation_env.atomic import TEMP_MARK, atomic_path, fsync_folder, temporary_beside
 
 __all__ = [
     "ARTIFACTS",
@@ -85,47 +84,13 @@ CHECKPOINTS = "checkpoints"
 _CHECKPOINT_RE = re.compile(r"model_(\d+)_steps")
 
 
-def _fsync_dir(folder: Path) -> None:
-    """Make a rename in ``folder`` durable (a no-op where folders cannot be opened, e.g. Windows)."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-#: The process's umask, read once: temporary files get the mode ``open()`` would give the final file.
-_FILE_MODE = 0o666 & ~_umask()
-
-
-def _temp_file(path: Path) -> tuple[int, Path]:
-    """A new temporary file beside ``path``, named as :func:`marine_formation_env.atomic.atomic_path` names them."""
-    fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=f"{TEMP_MARK}{path.suffix}")
-    try:
-        os.fchmod(fd, _FILE_MODE)  # mkstemp makes 0600 files
-    except (AttributeError, OSError):  # no fchmod on Windows
-        pass
-    return fd, Path(name)
-
-
 @contextlib.contextmanager
 def _staged(path: Path) -> Iterator[tuple[IO[bytes], Path]]:
     """An open temporary file beside ``path``; flushed and fsync-ed on exit, removed on error."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = _temp_file(path)
+    tmp = temporary_beside(path)
     try:
-        with os.fdopen(fd, "wb") as handle:
+        with open(tmp, "wb") as handle:
             yield handle, tmp
             handle.flush()
             os.fsync(handle.fileno())
@@ -197,9 +162,9 @@ def _apply_journal(folder: Path) -> list[str]:
     for tmp_name, name in renames:
         if (folder / tmp_name).exists():
             os.replace(folder / tmp_name, folder / name)
-    _fsync_dir(folder)
+    fsync_folder(folder)
     journal.unlink()
-    _fsync_dir(folder)
+    fsync_folder(folder)
     return [name for _, name in renames]
 
 
@@ -293,7 +258,7 @@ def save_checkpoint(model: Any, out: Path, steps: int | None = None) -> Path:
     if normalizer is not None:
         if path.exists():
             path.unlink()
-            _fsync_dir(folder)
+            fsync_folder(folder)
         save_normalizer(normalizer, folder / f"model_vecnormalize_{steps}_steps.pkl")
     save_model(model, path)
     return path
