@@ -21,8 +21,12 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
   a fused multiply-add kernel on in-cache arrays) that the batched core reaches.
 
 Each case runs in its own subprocess (so that memory peaks and imports do not
-mix), each timing is the median of ``--repeats`` repeats, and actions are drawn
-before timing starts. Peers that cannot be imported are reported as such; the
+mix). Timings are steady state: a warm-up of at least 3 s that also goes
+through episode ends (so that the autoreset path has run and been compiled),
+then ``--repeats`` timed repeats, reported as the median and the spread
+(slowest, quartiles, fastest). Actions are drawn before timing starts. The
+first ``step()`` of a fresh process is timed separately, with an empty and
+with a filled numba cache. Peers that cannot be imported are reported as such; the
 ``bench`` extra installs them (``pip install 'marine-formation-env[bench]'``).
 """
 
@@ -45,28 +49,56 @@ import numpy as np
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser
 
-__all__ = ["count_vessel_step_ops", "main", "run_case"]
+__all__ = ["count_vessel_step_ops", "first_step_latency", "main", "run_case"]
 
 BATCH_SIZES = (1, 64, 1024, 8192)
 ACTION_POOL = 64  # pre-drawn random actions, cycled
 
 
-def _time_steps(step: Callable[[int], None], min_seconds: float, repeats: int) -> dict[str, Any]:
-    """Median steps/s of ``repeats`` runs of at least ``min_seconds`` each (after a warm-up)."""
-    for k in range(20):
-        step(k)
+#: Warm-up before timing [s], at least: long enough for every compiled path to have been compiled.
+WARMUP_SECONDS = 3.0
+#: Episode ends (autoresets) that the warm-up must have gone through before timing starts.
+WARMUP_RESETS = 2
+
+
+def _time_steps(
+    step: Callable[[int], int], min_seconds: float, repeats: int, warmup_seconds: float = WARMUP_SECONDS
+) -> dict[str, Any]:
+    """Steady-state steps/s: ``repeats`` timed runs of at least ``min_seconds`` each, after a warm-up.
+
+    ``step(k)`` takes one step and returns how many episode ends (resets) it
+    went through. The warm-up lasts at least ``warmup_seconds`` *and* until
+    :data:`WARMUP_RESETS` resets have happened, so that every code path,
+    autoreset included, has run (and been compiled) before timing; a peer
+    that never resets (``step`` returning 0) warms up for the time alone.
+    Reports the median, the spread (min, quartiles, max) and every repeat.
+    """
+    count = resets = 0
+    start = time.perf_counter()
+    deadline = start + 10.0 * max(warmup_seconds, 1.0)  # a peer whose episodes never end stops waiting
+    while time.perf_counter() - start < warmup_seconds or (resets < WARMUP_RESETS and time.perf_counter() < deadline):
+        resets += step(count)
+        count += 1
+    warmup = {"steps": count, "resets": resets, "seconds": time.perf_counter() - start}
     rates = []
     for _ in range(repeats):
-        count, start = 0, time.perf_counter()
+        done, begin = 0, time.perf_counter()
         while True:
             for _ in range(50):
                 step(count)
                 count += 1
-            elapsed = time.perf_counter() - start
+                done += 1
+            elapsed = time.perf_counter() - begin
             if elapsed >= min_seconds:
                 break
-        rates.append(count / elapsed)
-    return {"steps_per_s": float(np.median(rates)), "repeats": rates}
+        rates.append(done / elapsed)
+    q1, q3 = np.percentile(rates, [25, 75])
+    return {
+        "steps_per_s": float(np.median(rates)),
+        "spread": {"min": float(min(rates)), "q1": float(q1), "q3": float(q3), "max": float(max(rates))},
+        "repeats": rates,
+        "warmup": warmup,
+    }
 
 
 # ------------------------------------------------------------------ our cases
@@ -78,10 +110,12 @@ def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto", scen
     pool = [{a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents} for _ in range(ACTION_POOL)]
     env.reset(seed=0)
 
-    def step(k: int) -> None:
+    def step(k: int) -> int:
         env.step(pool[k % ACTION_POOL])
         if not env.agents:
             env.reset()
+            return 1
+        return 0
 
     return _time_steps(step, min_seconds, repeats)
 
@@ -96,8 +130,9 @@ def _ours_batched(
     pool = [rng.uniform(-1, 1, env.action_space.shape).astype(np.float32) for _ in range(8)]
     env.reset(seed=0)
 
-    def step(k: int) -> None:
-        env.step(pool[k % len(pool)])
+    def step(k: int) -> int:
+        _, _, terminated, truncated, _ = env.step(pool[k % len(pool)])
+        return int(np.count_nonzero(terminated | truncated))  # reset at the next step (NEXT_STEP autoreset)
 
     out = _time_steps(step, min_seconds, repeats)
     out["env_steps_per_s"] = out["steps_per_s"] * b
@@ -116,10 +151,12 @@ def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
         for _ in range(ACTION_POOL)
     ]
 
-    def step(k: int) -> None:
+    def step(k: int) -> int:
         env.step(pool[k % ACTION_POOL])
         if not env.agents:
             env.reset()
+            return 1
+        return 0
 
     return _time_steps(step, min_seconds, repeats)
 
@@ -133,8 +170,9 @@ def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     env.reset()
     pool = [[torch.rand(b, 2) * 2.0 - 1.0 for _ in range(3)] for _ in range(8)]
 
-    def step(k: int) -> None:
-        env.step(pool[k % len(pool)])
+    def step(k: int) -> int:
+        env.step(pool[k % len(pool)])  # VMAS does not reset by itself; neither does this loop
+        return 0
 
     out = _time_steps(step, min_seconds, repeats)
     out["env_steps_per_s"] = out["steps_per_s"] * b
@@ -233,6 +271,45 @@ def elementwise_peak(seconds: float = 0.5) -> float:
     return 2.0 * n * count / (time.perf_counter() - start)
 
 
+# ------------------------------------------------------------ first step
+FIRST_STEP = """
+import time
+start = time.perf_counter()
+import numpy as np
+import marine_formation_env
+env = marine_formation_env.parallel_env("paper", action_level="force", backend="{backend}")
+env.reset(seed=0)
+env.step({{a: np.zeros(2, dtype=np.float32) for a in env.agents}})
+print(time.perf_counter() - start)
+"""
+
+
+def first_step_latency() -> dict[str, float]:
+    """Seconds from a fresh interpreter to the first ``step()`` returning (import, construction, reset, step).
+
+    ``numba_cold``: numba compiles the kernel (an empty on-disk cache);
+    ``numba_warm``: the same cache, now filled, as a user's second run sees it;
+    ``numpy``: the reference backend, nothing to compile.
+    """
+    import tempfile
+
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
+        for label, backend in (("numba_cold", "numba"), ("numba_warm", "numba"), ("numpy", "numpy")):
+            proc = subprocess.run(
+                [sys.executable, "-c", FIRST_STEP.format(backend=backend)],
+                capture_output=True,
+                text=True,
+                env=env,
+                check=False,
+            )
+            if proc.returncode != 0:
+                raise RuntimeError(f"first-step run ({label}) failed: {proc.stderr.strip().splitlines()[-1:]}")
+            out[label] = float(proc.stdout.strip().splitlines()[-1])
+    return out
+
+
 # ------------------------------------------------------------------- driver
 def _subprocess_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     cmd = [
@@ -278,6 +355,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "ours_acoustic": _subprocess_case("ours_acoustic_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
         }
+    report["first_step_seconds"] = first_step_latency()
     ops = count_vessel_step_ops("force")
     peak = elementwise_peak()
     report["arithmetic"] = {**ops, "elementwise_peak_ops_per_s": peak}
@@ -298,7 +376,12 @@ def format_report(report: dict[str, Any]) -> str:
     """The report as a Markdown table."""
 
     def rate(entry: dict[str, Any], key: str) -> str:
-        return f"{entry[key]:,.0f}" if key in entry else f"n/a ({entry.get('unavailable', '?')})"
+        """The median rate and, in brackets, the slowest and fastest repeat."""
+        if key not in entry:
+            return f"n/a ({entry.get('unavailable', '?')})"
+        scale = entry[key] / entry["steps_per_s"]  # env-steps per step (B), or 1
+        low, high = entry["spread"]["min"] * scale, entry["spread"]["max"] * scale
+        return f"{entry[key]:,.0f} [{low:,.0f}–{high:,.0f}]"
 
     def mem(entry: dict[str, Any]) -> str:
         return f"{entry['max_rss_mb']:.0f}" if "max_rss_mb" in entry else "n/a"
@@ -337,6 +420,16 @@ def format_report(report: dict[str, Any]) -> str:
             f"| {label} | {rate(ours['ours'], key)} | {rate(ours['ours_acoustic'], key)} | "
             f"{ratio(ours['ours_acoustic'], ours['ours'], key)} | {ratio(ours['ours_acoustic'], peer, key)} |"
         )
+    first = report.get("first_step_seconds")
+    if first:
+        lines += [
+            "",
+            "First `step()` of a fresh process (import, construction, reset, step) [s]: "
+            f"numba with an empty cache {first['numba_cold']:.2f}, with the cache filled {first['numba_warm']:.2f}, "
+            f"numpy backend {first['numpy']:.2f}.",
+        ]
+    lines += ["", "Rates are medians of the timed repeats after a warm-up through episode ends; in brackets the "
+              "slowest and the fastest repeat."]
     ar = report["arithmetic"]
     lines.append("")
     lines.append(

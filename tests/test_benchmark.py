@@ -44,3 +44,19 @@ def test_cases_report_rates_and_missing_peers(monkeypatch: pytest.MonkeyPatch) -
     assert "unavailable" in missing and "vmas" in missing["unavailable"]
     with pytest.raises(ValueError, match="'warp_drive'"):
         benchmark.run_case("warp_drive", 1, 0.05, 1)
+
+
+def test_timing_warms_up_through_episode_ends_before_measuring() -> None:
+    calls: list[int] = []
+
+    def step(k: int) -> int:  # an "episode" ends every 500 steps
+        calls.append(k)
+        return int(k % 500 == 499)
+
+    out = benchmark._time_steps(step, min_seconds=0.01, repeats=3, warmup_seconds=0.0)
+    warm = out["warmup"]
+    assert warm["resets"] >= benchmark.WARMUP_RESETS and warm["steps"] >= 1000  # two episode ends passed
+    assert len(out["repeats"]) == 3
+    spread = out["spread"]
+    assert spread["min"] <= spread["q1"] <= out["steps_per_s"] <= spread["q3"] <= spread["max"]
+    assert calls == list(range(len(calls)))  # the step index keeps counting through the timed repeats
