@@ -14,6 +14,9 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
   (the batched core, with autoreset) at B = 1, 64, 1024, 8192 formations vs
   VMAS ``simple_spread`` on the CPU (``n_agents=3``, continuous actions) at the
   same B: env-steps/s (formation-steps: B per call).
+* ``scaling``: the batched env at B = 256 for n = 3, 8, 20, 50 vessels on a
+  random sparse digraph, with ideal links and the ``acoustic`` channel:
+  env-steps/s, vessel-steps/s, and the exponent of the cost's growth with n;
 * peak memory (max RSS of the process that ran the case);
 * the arithmetic cost of one vessel-step, counted by running the step on arrays
   that count every elementwise numpy operation (ufunc calls times elements),
@@ -49,7 +52,7 @@ import numpy as np
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser
 
-__all__ = ["count_vessel_step_ops", "first_step_latency", "main", "run_case"]
+__all__ = ["count_vessel_step_ops", "first_step_latency", "main", "run_case", "team_size_scaling"]
 
 BATCH_SIZES = (1, 64, 1024, 8192)
 ACTION_POOL = 64  # pre-drawn random actions, cycled
@@ -121,11 +124,16 @@ def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto", scen
 
 
 def _ours_batched(
-    b: int, min_seconds: float, repeats: int, backend: str = "auto", scenario: str = "paper"
+    b: int,
+    min_seconds: float,
+    repeats: int,
+    backend: str = "auto",
+    scenario: str = "paper",
+    **overrides: Any,
 ) -> dict[str, Any]:
     from marine_formation_env.vector import MarineFormationVectorEnv
 
-    env = MarineFormationVectorEnv(num_envs=b, scenario=scenario, action_level="force", backend=backend)
+    env = MarineFormationVectorEnv(num_envs=b, scenario=scenario, action_level="force", backend=backend, **overrides)
     rng = np.random.default_rng(0)
     pool = [rng.uniform(-1, 1, env.action_space.shape).astype(np.float32) for _ in range(8)]
     env.reset(seed=0)
@@ -198,6 +206,10 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
             out = _ours_batched(b, min_seconds, repeats)
         elif case == "vmas_batched":
             out = _vmas_batched(b, min_seconds, repeats)
+        elif case.startswith(("scaling_ideal_", "scaling_acoustic_")):
+            scenario, n = ("acoustic" if "acoustic" in case else "paper"), int(case.rsplit("_", 1)[1])
+            out = _ours_batched(b, min_seconds, repeats, scenario=scenario, n_vessels=n, topology="random")
+            out["vessel_steps_per_s"] = out["env_steps_per_s"] * n
         else:
             raise ValueError(f"unknown case {case!r}")
     except ImportError as err:
@@ -269,6 +281,33 @@ def elementwise_peak(seconds: float = 0.5) -> float:
         count += 200
         c *= 0.5
     return 2.0 * n * count / (time.perf_counter() - start)
+
+
+# ------------------------------------------------------------ team size
+#: Team sizes of the scaling case, and its number of formations.
+TEAM_SIZES = (3, 8, 20, 50)
+SCALING_B = 256
+
+
+def team_size_scaling(min_seconds: float, repeats: int, sizes: Sequence[int] = TEAM_SIZES) -> dict[str, Any]:
+    """env-steps/s and vessel-steps/s at B = :data:`SCALING_B` for n vessels on a random sparse digraph.
+
+    Ideal links and the ``acoustic`` channel. The cost of one env-step grows
+    with n (the observation holds n − 1 slots per vessel, so it is O(n²) per
+    formation); ``exponent`` is the least-squares slope of log(seconds per
+    env-step) against log(n).
+    """
+    out: dict[str, Any] = {"b": SCALING_B, "sizes": list(sizes)}
+    for links in ("ideal", "acoustic"):
+        rows: dict[str, Any] = {
+            str(n): _subprocess_case(f"scaling_{links}_{n}", SCALING_B, min_seconds, repeats) for n in sizes
+        }
+        measured = [(int(n), row["env_steps_per_s"]) for n, row in rows.items() if "env_steps_per_s" in row]
+        if len(measured) >= 2:
+            ns, rates = np.array(measured, dtype=float).T
+            rows["exponent"] = float(np.polyfit(np.log(ns), np.log(1.0 / rates), 1)[0])
+        out[links] = rows
+    return out
 
 
 # ------------------------------------------------------------ first step
@@ -355,6 +394,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "ours_acoustic": _subprocess_case("ours_acoustic_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
         }
+    report["scaling"] = team_size_scaling(min_seconds, repeats)
     report["first_step_seconds"] = first_step_latency()
     ops = count_vessel_step_ops("force")
     peak = elementwise_peak()
@@ -420,6 +460,24 @@ def format_report(report: dict[str, Any]) -> str:
             f"| {label} | {rate(ours['ours'], key)} | {rate(ours['ours_acoustic'], key)} | "
             f"{ratio(ours['ours_acoustic'], ours['ours'], key)} | {ratio(ours['ours_acoustic'], peer, key)} |"
         )
+    scaling = report.get("scaling")
+    if scaling:
+        lines += [
+            "",
+            f"Team size (B = {scaling['b']} formations, random sparse digraph, random force actions):",
+            "",
+            "| n | ideal env-steps/s | ideal vessel-steps/s | acoustic env-steps/s | acoustic vessel-steps/s |",
+            "|---|---|---|---|---|",
+        ]
+        for n in scaling["sizes"]:
+            ideal, acoustic = scaling["ideal"][str(n)], scaling["acoustic"][str(n)]
+            lines.append(
+                f"| {n} | {rate(ideal, 'env_steps_per_s')} | {rate(ideal, 'vessel_steps_per_s')} | "
+                f"{rate(acoustic, 'env_steps_per_s')} | {rate(acoustic, 'vessel_steps_per_s')} |"
+            )
+        exponents = [f"{links} {scaling[links]['exponent']:.2f}" for links in ("ideal", "acoustic")
+                     if "exponent" in scaling[links]]
+        lines.append(f"Cost per env-step grows as n^k with k = {', '.join(exponents)} (least squares over n).")
     first = report.get("first_step_seconds")
     if first:
         lines += [

@@ -60,3 +60,15 @@ def test_timing_warms_up_through_episode_ends_before_measuring() -> None:
     spread = out["spread"]
     assert spread["min"] <= spread["q1"] <= out["steps_per_s"] <= spread["q3"] <= spread["max"]
     assert calls == list(range(len(calls)))  # the step index keeps counting through the timed repeats
+
+
+def test_team_size_scaling_reports_vessel_steps_and_the_growth_exponent(monkeypatch: pytest.MonkeyPatch) -> None:
+    def fake_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, float]:
+        n = int(case.rsplit("_", 1)[1])
+        return {"env_steps_per_s": 1e6 / n**2, "steps_per_s": 1e6 / n**2 / b}  # cost ∝ n²
+
+    monkeypatch.setattr(benchmark, "_subprocess_case", fake_case)
+    out = benchmark.team_size_scaling(0.1, 1, sizes=(3, 8, 20))
+    assert out["ideal"]["exponent"] == pytest.approx(2.0) and out["acoustic"]["exponent"] == pytest.approx(2.0)
+    real = benchmark.run_case("scaling_acoustic_5", 4, 0.05, 1)
+    assert real["vessel_steps_per_s"] == pytest.approx(5 * real["env_steps_per_s"])
