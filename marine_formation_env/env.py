@@ -116,8 +116,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     among graphs periodically. ``current=`` adds an ocean current to the
     kinematics (``u, v`` are then velocities through the water);
     ``sensor_noise=`` adds noise to each vessel's measurement of itself. The
-    scenarios ``acoustic``, ``radio`` and ``current`` preset them (README,
-    "Beyond the paper"). The channel draws from its own stream, seeded with
+    scenarios ``acoustic``, ``radio`` and ``current`` preset them (docs/channel.md,
+    "Presets"). The channel draws from its own stream, seeded with
     the reset seed (or ``options={"channel_seed": k}``). With the defaults
     nothing of this runs.
 

@@ -273,7 +273,7 @@ _PAPER: dict[str, Any] = {
 
 #: Named scenarios: defaults that :func:`make_config` starts from. Besides the
 #: paper's own, three presets put its scenario into the sea the paper is
-#: motivated by (numbers and reasons in the README, "Beyond the paper"):
+#: motivated by (numbers and reasons in docs/channel.md, "Presets"):
 #:
 #: * ``acoustic``: underwater acoustic modems. One shared channel in TDMA with
 #:   4 s slots (a short acoustic frame at tens to hundreds of bit/s takes
