@@ -407,7 +407,7 @@ def test_extrapolation_recovers_the_current_difference_for_constant_velocities()
 
 
 def test_reference_under_radio_converges_with_extrapolation():
-    """Documented bounds (README): extrapolating reference under `radio` settles; final errors < 1 cm."""
+    """Documented bounds (docs/results.md): extrapolating reference under `radio` settles; final errors < 1 cm."""
     env = marine_formation_env.parallel_env("radio")
     from baselines.metrics import episode_metrics
     from baselines.rollout import run_episode
