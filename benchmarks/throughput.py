@@ -477,7 +477,7 @@ def format_report(report: dict[str, Any]) -> str:
             )
         exponents = [f"{links} {scaling[links]['exponent']:.2f}" for links in ("ideal", "acoustic")
                      if "exponent" in scaling[links]]
-        lines.append(f"Cost per env-step grows as n^k with k = {', '.join(exponents)} (least squares over n).")
+        lines += ["", f"Cost per env-step grows as n^k with k = {', '.join(exponents)} (least squares over n)."]
     first = report.get("first_step_seconds")
     if first:
         lines += [
