@@ -17,6 +17,10 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
 * ``scaling``: the batched env at B = 256 for n = 3, 8, 20, 50 vessels on a
   random sparse digraph, with ideal links and the ``acoustic`` channel:
   env-steps/s, vessel-steps/s, and the exponent of the cost's growth with n;
+* ``jaxmarl``: JaxMARL's MPE ``simple_spread`` (3 agents, continuous
+  actions), jit-compiled and vmapped over B on the CPU, timed both as a
+  jitted ``lax.scan`` of 100 steps per call (no Python between steps: favours
+  JaxMARL) and as one jitted step per Python call (like-for-like);
 * peak memory (max RSS of the process that ran the case);
 * the arithmetic cost of one vessel-step, counted by running the step on arrays
   that count every elementwise numpy operation (ufunc calls times elements),
@@ -187,6 +191,73 @@ def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     return out
 
 
+#: Steps per jitted ``lax.scan`` call of the JaxMARL rollout case.
+JAX_SCAN_STEPS = 100
+
+
+def _jaxmarl_batched(b: int, min_seconds: float, repeats: int, scan: bool) -> dict[str, Any]:
+    """JaxMARL's MPE ``simple_spread`` (3 agents, continuous actions), jit-compiled and vmapped over ``b``.
+
+    ``scan``: :data:`JAX_SCAN_STEPS` steps per call inside ``lax.scan`` (no
+    Python between steps: the way JaxMARL is meant to be used, and the fastest
+    for it); otherwise one jitted, vmapped step per Python call, as a Python
+    training loop steps an env (the like-for-like comparison). JaxMARL resets
+    finished episodes inside ``step`` (its own autoreset).
+    """
+    import jax
+    import jax.numpy as jnp
+    from jaxmarl import make
+
+    env = make("MPE_simple_spread_v3", num_agents=3, action_type="Continuous")
+    agents = env.agents
+    dim = int(np.prod(env.action_space(agents[0]).shape))
+    keys = jax.random.split(jax.random.PRNGKey(0), b)
+    _, state = jax.vmap(env.reset)(keys)
+    rng = np.random.default_rng(0)
+    pool = [
+        {a: jnp.asarray(rng.uniform(0.0, 1.0, (b, dim)), dtype=jnp.float32) for a in agents} for _ in range(8)
+    ]
+    one_step = jax.vmap(env.step, in_axes=(0, 0, 0))
+
+    if scan:
+
+        def rollout(state: Any, key: Any, actions: dict[str, Any]) -> Any:
+            def body(carry: Any, _: Any) -> Any:
+                state, key = carry
+                key, sub = jax.random.split(key)
+                _, state, _, _, _ = one_step(jax.random.split(sub, b), state, actions)
+                return (state, key), None
+
+            (state, key), _ = jax.lax.scan(body, (state, key), None, length=JAX_SCAN_STEPS)
+            return state, key
+
+        run = jax.jit(rollout)
+        carry = [state, jax.random.PRNGKey(1)]
+
+        def step(k: int) -> int:
+            carry[0], carry[1] = run(carry[0], carry[1], pool[k % len(pool)])
+            jax.block_until_ready(carry[0])
+            return 0
+
+        out = _time_steps(step, min_seconds, repeats)
+        out["steps_per_s"] *= JAX_SCAN_STEPS
+        out["spread"] = {key: value * JAX_SCAN_STEPS for key, value in out["spread"].items()}
+        out["repeats"] = [value * JAX_SCAN_STEPS for value in out["repeats"]]
+    else:
+        jitted = jax.jit(one_step)
+        holder = [state, jax.random.PRNGKey(1)]
+
+        def step(k: int) -> int:
+            holder[1], sub = jax.random.split(holder[1])
+            _, holder[0], _, _, _ = jitted(jax.random.split(sub, b), holder[0], pool[k % len(pool)])
+            jax.block_until_ready(holder[0])
+            return 0
+
+        out = _time_steps(step, min_seconds, repeats)
+    out["env_steps_per_s"] = out["steps_per_s"] * b
+    return out
+
+
 def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
     """Run one case in this process and return its measurements (and max RSS)."""
     try:
@@ -206,6 +277,10 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
             out = _ours_batched(b, min_seconds, repeats)
         elif case == "vmas_batched":
             out = _vmas_batched(b, min_seconds, repeats)
+        elif case == "jaxmarl_scan_batched":
+            out = _jaxmarl_batched(b, min_seconds, repeats, scan=True)
+        elif case == "jaxmarl_step_batched":
+            out = _jaxmarl_batched(b, min_seconds, repeats, scan=False)
         elif case.startswith(("scaling_ideal_", "scaling_acoustic_")):
             scenario, n = ("acoustic" if "acoustic" in case else "paper"), int(case.rsplit("_", 1)[1])
             out = _ours_batched(b, min_seconds, repeats, scenario=scenario, n_vessels=n, topology="random")
@@ -393,6 +468,8 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "ours_numpy": _subprocess_case("ours_numpy_batched", b, min_seconds, repeats),
             "ours_acoustic": _subprocess_case("ours_acoustic_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
+            "jaxmarl_scan": _subprocess_case("jaxmarl_scan_batched", b, min_seconds, repeats),
+            "jaxmarl_step": _subprocess_case("jaxmarl_step_batched", b, min_seconds, repeats),
         }
     report["scaling"] = team_size_scaling(min_seconds, repeats)
     report["first_step_seconds"] = first_step_latency()
@@ -447,6 +524,22 @@ def format_report(report: dict[str, Any]) -> str:
             f"| {label} | {rate(ours['ours'], key)} | {rate(peer, key)} | {ratio(ours['ours'], peer, key)} | "
             f"{rate(ours['ours_numpy'], key)} | {ratio(ours['ours_numpy'], peer, key)} | {mem(ours['ours'])} | "
             f"{mem(peer)} |"
+        )
+    lines += [
+        "",
+        "Against JaxMARL's MPE `simple_spread` (jit + vmap on the CPU). `scan`: 100 steps per jitted `lax.scan` "
+        "call, no Python between steps, which favours JaxMARL; `step`: one jitted vmapped step per Python call, "
+        "like ours:",
+        "",
+        "| B | ours [env-steps/s] | JaxMARL scan | ours / scan | JaxMARL step | ours / step |",
+        "|---|---|---|---|---|---|",
+    ]
+    for b, row in report["batched"].items():
+        scan, step = row.get("jaxmarl_scan", {}), row.get("jaxmarl_step", {})
+        key = "env_steps_per_s"
+        lines.append(
+            f"| {b} | {rate(row['ours'], key)} | {rate(scan, key)} | {ratio(row['ours'], scan, key)} | "
+            f"{rate(step, key)} | {ratio(row['ours'], step, key)} |"
         )
     lines += [
         "",
