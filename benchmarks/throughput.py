@@ -210,7 +210,8 @@ def _jaxmarl_batched(b: int, min_seconds: float, repeats: int, scan: bool) -> di
 
     env = make("MPE_simple_spread_v3", num_agents=3, action_type="Continuous")
     agents = env.agents
-    dim = int(np.prod(env.action_space(agents[0]).shape))
+    space: Any = env.action_space(agents[0])  # a Box with continuous actions (its base class has no shape)
+    dim = int(np.prod(space.shape))
     keys = jax.random.split(jax.random.PRNGKey(0), b)
     _, state = jax.vmap(env.reset)(keys)
     rng = np.random.default_rng(0)
