@@ -116,9 +116,14 @@ def _ours_parallel(min_seconds: float, repeats: int, backend: str = "auto", scen
     rng = np.random.default_rng(0)
     pool = [{a: rng.uniform(-1, 1, 2).astype(np.float32) for a in env.possible_agents} for _ in range(ACTION_POOL)]
     env.reset(seed=0)
+    return _time_parallel_env(env, pool, min_seconds, repeats)
+
+
+def _time_parallel_env(env: Any, pool: list[dict[str, Any]], min_seconds: float, repeats: int) -> dict[str, Any]:
+    """Steady-state steps/s of a PettingZoo ParallelEnv (ours or a peer), resetting when the episode ends."""
 
     def step(k: int) -> int:
-        env.step(pool[k % ACTION_POOL])
+        env.step(pool[k % len(pool)])
         if not env.agents:
             env.reset()
             return 1
@@ -162,15 +167,7 @@ def _mpe2_parallel(min_seconds: float, repeats: int) -> dict[str, Any]:
         {a: rng.uniform(0, 1, env.action_space(a).shape).astype(np.float32) for a in env.possible_agents}
         for _ in range(ACTION_POOL)
     ]
-
-    def step(k: int) -> int:
-        env.step(pool[k % ACTION_POOL])
-        if not env.agents:
-            env.reset()
-            return 1
-        return 0
-
-    return _time_steps(step, min_seconds, repeats)
+    return _time_parallel_env(env, pool, min_seconds, repeats)
 
 
 def _vmas_batched(b: int, min_seconds: float, repeats: int) -> dict[str, Any]:
