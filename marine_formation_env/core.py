@@ -69,7 +69,7 @@ from marine_formation_env.dynamics import (
     vessel_rhs,
     wrap_angle,
 )
-from marine_formation_env.errors import float_array
+from marine_formation_env.errors import checked_array, float_array
 from marine_formation_env.observations import ObservationLayout, observation_bounds
 from marine_formation_env.rules import (
     COORDINATION,
@@ -87,6 +87,9 @@ from marine_formation_env.scenarios import ScenarioConfig, min_separation
 from marine_formation_env.streams import channel_streams
 
 __all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
+
+#: Appended to a wrong-shape message of a state array.
+COLUMNS_HINT = " (columns x, y, psi, u, v, r)"
 
 REWARD_COMPONENTS = ("cross_track", "heading", "coordination", "speed", "effort", "terminal")
 
@@ -251,14 +254,7 @@ class FormationCore:
         """
         ids = slice(None) if env_ids is None else env_ids
         target_shape = self.state[ids].shape
-        arr = float_array(initial_state, "initial_state")
-        if arr.shape != (self.n, 6) and arr.shape != target_shape:
-            raise ValueError(
-                f"initial_state must have shape ({self.n}, 6) (columns x, y, psi, u, v, r), got {arr.shape}"
-            )
-        if not np.all(np.isfinite(arr)):
-            bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-            raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
+        arr = checked_array(initial_state, "initial_state", [(self.n, 6), target_shape], hint=COLUMNS_HINT)
         self.state[ids] = arr
         self.time[ids] = 0.0
         self.steps[ids] = 0

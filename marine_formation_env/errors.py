@@ -13,14 +13,23 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from marine_formation_env.params import ParameterError
 
-__all__ = ["ConfigError", "build_config", "check_bool", "check_number", "check_seed", "float_array", "whole_periods"]
+__all__ = [
+    "ConfigError",
+    "build_config",
+    "check_bool",
+    "check_number",
+    "check_seed",
+    "checked_array",
+    "float_array",
+    "whole_periods",
+]
 
 
 class ConfigError(ValueError):
@@ -91,6 +100,25 @@ def float_array(value: Any, name: str) -> np.ndarray:
         return np.asarray(value, dtype=float)
     except (TypeError, ValueError) as err:
         raise TypeError(f"{name} must be a numeric array, got {_short(value)} ({err})") from None
+
+
+def checked_array(
+    value: Any, name: str, shapes: Sequence[tuple[int, ...]], error: type[ValueError] = ValueError, hint: str = ""
+) -> np.ndarray:
+    """A finite float64 array of one of ``shapes``; ``error`` naming ``name`` and the offending entry otherwise.
+
+    Raises:
+        TypeError: not numeric (:func:`float_array`).
+        error: another shape (``hint`` describes the columns), or a non-finite entry.
+    """
+    arr = float_array(value, name)
+    if arr.shape not in [tuple(shape) for shape in shapes]:
+        expected = " or ".join(str(tuple(shape)) for shape in shapes)
+        raise error(f"{name} must have shape {expected}{hint}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
+        raise error(f"{name} must be finite, but {name}{list(bad)} = {arr[bad]}")
+    return arr
 
 
 def _short(value: Any, limit: int = 120) -> str:

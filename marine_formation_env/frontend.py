@@ -44,8 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from marine_formation_env.core import FormationCore, StepOutput
-from marine_formation_env.errors import check_seed, float_array
+from marine_formation_env.core import COLUMNS_HINT, FormationCore, StepOutput
+from marine_formation_env.errors import check_seed, checked_array
 from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config
 
 __all__ = [
@@ -70,8 +70,8 @@ def resolve_config(scenario: str | ScenarioConfig, overrides: Mapping[str, Any])
     """The configuration a front end runs: a scenario name with overrides, or a ready :class:`ScenarioConfig`.
 
     Raises:
-        ConfigError: unknown scenario or override (:func:`make_config`), or
-            overrides given together with a ready configuration.
+        ConfigError: unknown scenario or override (:func:`make_config`).
+        TypeError: overrides given together with a ready configuration.
     """
     if isinstance(scenario, ScenarioConfig):
         if overrides:
@@ -111,14 +111,8 @@ def check_initial_state(config: ScenarioConfig, value: Any, batch: int | None = 
             end the episode at its first step (names the vessel and the bound).
     """
     n = config.n_vessels
-    arr = float_array(value, "initial_state")
     shapes = [(n, 6)] + ([] if batch is None else [(batch, n, 6)])
-    if arr.shape not in shapes:
-        expected = " or ".join(str(s) for s in shapes)
-        raise ValueError(f"initial_state must have shape {expected} (columns x, y, psi, u, v, r), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(arr))[0])
-        raise ValueError(f"initial_state must be finite, but initial_state{list(bad)} = {arr[bad]}")
+    arr = checked_array(value, "initial_state", shapes, hint=COLUMNS_HINT)
     for b, state in enumerate(arr.reshape(-1, n, 6)):
         problem = initial_state_problem(config, state)
         if problem is not None:
@@ -200,7 +194,7 @@ def read_reset(
 
 def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     """The per-vessel info schema (module docstring) as ``(B, N)`` arrays."""
-    b, n = out.reward.shape
+    n = out.reward.shape[1]
     flags = {"collision": out.collision, "out_of_bounds": out.out_of_bounds}
     infos: dict[str, Any] = {
         "reward_components": {key: np.array(value, dtype=np.float64) for key, value in out.components.items()},
@@ -209,7 +203,6 @@ def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     }
     if out.commanded_speed is not None:
         infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
-    assert infos["time"].shape == (b, n)
     return infos
 
 

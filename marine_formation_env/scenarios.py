@@ -24,7 +24,14 @@ import numpy as np
 
 from marine_formation_env.channel import ChannelConfig
 from marine_formation_env.disturbances import Current, SensorNoise
-from marine_formation_env.errors import ConfigError, build_config, check_number, check_seed, whole_periods
+from marine_formation_env.errors import (
+    ConfigError,
+    build_config,
+    check_number,
+    check_seed,
+    checked_array,
+    whole_periods,
+)
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
 from marine_formation_env.settings import (
@@ -651,15 +658,10 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
 
 
 def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """:func:`~marine_formation_env.errors.checked_array` with every refusal a :class:`ConfigError`."""
     try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a numeric array of shape {shape}, got {value!r}") from None
-    if arr.shape != shape:
-        raise ConfigError(f"{name} must have shape {shape}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        bad = np.argwhere(~np.isfinite(arr))[0]
-        raise ConfigError(f"{name} must be finite, but {name}[{', '.join(map(str, bad))}] = {arr[tuple(bad)]}")
-    return arr
+        return checked_array(value, name, [shape], ConfigError)
+    except TypeError as err:
+        raise ConfigError(str(err)) from None
 
 
