@@ -15,6 +15,7 @@ built from a :class:`ScenarioConfig`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -591,8 +592,14 @@ def sample_initial_states(config: ScenarioConfig, rngs: Sequence[np.random.Gener
 
 def min_separation(state: np.ndarray) -> np.ndarray:
     """``(B,)`` the smallest distance [m] between two vessels of each formation of ``state`` ``(B, N, 6)``."""
-    i, j = np.triu_indices(state.shape[1], k=1)
+    i, j = _pairs(state.shape[1])
     return np.hypot(state[:, i, 0] - state[:, j, 0], state[:, i, 1] - state[:, j, 1]).min(axis=1)  # type: ignore[no-any-return]
+
+
+@functools.lru_cache(maxsize=64)
+def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The index pairs ``i < j`` of ``n`` vessels (computed once per n: the numpy step needs them every step)."""
+    return np.triu_indices(n, k=1)  # type: ignore[return-value]
 
 
 def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
@@ -663,5 +670,3 @@ def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
         return checked_array(value, name, [shape], ConfigError)
     except TypeError as err:
         raise ConfigError(str(err)) from None
-
-
