@@ -96,7 +96,8 @@ def _rollout(
     if callable(getattr(policy, "reset", None)):
         policy.reset()
     batched = callable(getattr(policy, "act_batch", None))
-    speed_of = getattr(policy, "commands", None)
+    # the env reports u_c at the speed and guidance levels; only at force does the policy's own u_c say anything
+    speed_of = getattr(policy, "commands", None) if cfg.action_level == "force" else None
     states = np.empty((steps + 1, b, n, 6))
     times = np.empty((steps + 1, b))
     u_c = np.full((steps, b, n), np.nan)
