@@ -13,7 +13,10 @@ with everything joined:
   ``[j·A, (j+1)·A)``, same maps as the ParallelEnv;
 * reward: the mean of the vessels' rewards (the shared team reward);
   ``info["vessel_rewards"]`` holds them all, ``info["reward_components"]``
-  the vessel-averaged terms;
+  the vessel-averaged terms (they sum to the reward); ``time``,
+  ``collision``, ``out_of_bounds`` and (``speed``, ``guidance``) the
+  ``commanded_speed`` of each vessel complete the per-formation info schema of
+  :mod:`marine_formation_env.frontend`, also returned by ``reset()`` with zeros;
 * termination and truncation: as the ParallelEnv (whole formation).
 
 Because each block is masked by the graph, a centralized policy still receives
