@@ -64,6 +64,8 @@ ACTION_POOL = 64  # pre-drawn random actions, cycled
 
 #: Warm-up before timing [s], at least: long enough for every compiled path to have been compiled.
 WARMUP_SECONDS = 3.0
+#: A case's worker is stopped after this many seconds [s] and reported as unavailable.
+CASE_TIMEOUT = 900.0
 #: Episode ends (autoresets) that the warm-up must have gone through before timing starts.
 WARMUP_RESETS = 2
 
@@ -90,11 +92,10 @@ def _time_steps(
     rates = []
     for _ in range(repeats):
         done, begin = 0, time.perf_counter()
-        while True:
-            for _ in range(50):
-                step(count)
-                count += 1
-                done += 1
+        while True:  # the clock is read after every step (50 ns): a slow step (a 100-step scan) stops in time
+            step(count)
+            count += 1
+            done += 1
             elapsed = time.perf_counter() - begin
             if elapsed >= min_seconds:
                 break
@@ -435,7 +436,10 @@ def _subprocess_case(case: str, b: int, min_seconds: float, repeats: int) -> dic
         str(repeats),
     ]
     env = {**os.environ, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS", "1")}
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False, timeout=CASE_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        return {"unavailable": f"worker stopped after {CASE_TIMEOUT:.0f} s (case timeout)"}
     if proc.returncode != 0:
         return {"unavailable": f"worker failed: {proc.stderr.strip().splitlines()[-1:]}"}
     return json.loads(proc.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]

@@ -6,7 +6,12 @@ they are registered with numba (``register_jitable``) and called per vessel on
 scalars, so the equations exist once. What the kernel adds is the loop: per
 formation (in parallel), per vessel, the RK4 substeps of the level's closed
 loop, then the masked observations, reward components and terminations, all
-without temporaries. :class:`~marine_formation_env.core.FormationCore` uses
+without temporaries. With non-ideal links the same loop then runs the
+formation's channel instant (sensor noise, links, loss, delays, the held
+messages, the observations through them) on the channel's arrays in place,
+reading the same random rows as :class:`~marine_formation_env.channel.LinkChannel`;
+formations that restart (autoreset) load their initial state instead of
+stepping. :class:`~marine_formation_env.core.FormationCore` uses
 it when numba is installed (``backend="auto"``) and keeps the numpy path as
 the reference implementation; the tests check that both agree.
 """
@@ -15,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import math
 import types
 from collections import namedtuple
 from typing import Any
@@ -23,6 +29,7 @@ import numpy as np
 from numba import njit, prange
 from numba.extending import register_jitable
 
+from marine_formation_env import channel as channel_module
 from marine_formation_env import control, dynamics, rules
 from marine_formation_env.rules import AGE, COORDINATION, LINK, OWN_SIZE, SLOT_SIZE, VELOCITY
 
@@ -55,6 +62,7 @@ for _fn in (
     rules.terminal_term,
     rules.outside_workspace,
     rules.outside_envelope,
+    channel_module.in_range,
 ):
     register_jitable(_fn)
 
@@ -72,6 +80,7 @@ effort_term = rules.effort_term
 terminal_term = rules.terminal_term
 outside_workspace = rules.outside_workspace
 outside_envelope = rules.outside_envelope
+in_range = channel_module.in_range
 
 
 def coefficients(config: Any) -> tuple[Any, Any]:
@@ -95,15 +104,23 @@ def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0,
     ``sea = (t0, speed, amplitude, ω, cos β, sin β)``: the period's start time and the current.
     """
     t0, c_speed, c_amp, c_omega, c_cos, c_sin = sea
-    vc_x, vc_y = current_velocity(c_speed, c_amp, c_omega, c_cos, c_sin, t0 + t)
     if level == 0:
-        return vessel_derivatives(p, psi, u, v, r, cmd0, cmd1, None, vc_x, vc_y)
-    acc = accelerations(p, u, v, r)
-    if level == 1:
-        tau_u, tau_r = heading_tracking_inputs(p, g, cmd1, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
+        tau_u, tau_r = cmd0, cmd1
+        acc = accelerations(p, u, v, r)
     else:
-        tau_u, tau_r = path_following_inputs(p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
-    tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)
+        acc = accelerations(p, u, v, r)
+        if level == 1:
+            tau_u, tau_r = heading_tracking_inputs(
+                p, g, cmd1, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
+            )
+        else:
+            tau_u, tau_r = path_following_inputs(
+                p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
+            )
+        tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)
+    if c_speed == 0.0 and c_amp == 0.0:  # still water (Current.is_zero): no current term, as in the numpy path
+        return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, None, None)
+    vc_x, vc_y = current_velocity(c_speed, c_amp, c_omega, c_cos, c_sin, t0 + t)
     return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, vc_x, vc_y)
 
 
@@ -170,12 +187,29 @@ def _kernel(  # type: ignore[no-untyped-def]
     flags,  # (B, 2) bool out: collision, out_of_bounds
     theta,  # (B, N) scratch: x − D_x
     xdot,  # (B, N) scratch: ẋ
+    restart,  # (B,) bool: start a new episode from `initial` instead of stepping (autoreset)
+    initial,  # (B, N, 6) initial states of the restarting formations (other rows unused)
+    time1,  # (B,) time at the end of the period (0 for restarting formations)
+    steps,  # (B,) control periods since reset, after this step (0 for restarting formations)
+    channel_on,  # the links are not ideal: _channel_instant writes the observations
+    chan,  # the channel's constants, state and streams (ChannelArgs); placeholders with ideal links
 ):
     n_form, n = state.shape[0], state.shape[1]
     h = dt / substeps
+    # the threads cannot share tuples of arrays: unpack the channel's here, pack them again per formation
+    (noise, c_sea, c_offsets, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_link, c_pending, c_bounds) = chan
+    has_noise, c_normals, c_npos, c_scale, c_measured = noise
+    has_current, c_current = c_sea
+    c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx = c_link
+    c_pvalid, c_ptheta, c_pxdot, c_ptime = c_pending
+    c_slots, c_low, c_high = c_bounds
     for b in prange(n_form):
+        if restart[b]:
+            for j in range(n):
+                for m in range(6):
+                    state[b, j, m] = initial[b, j, m]
         # ---- integrate every vessel of formation b over one control period
-        for j in range(n):
+        for j in range(n if not restart[b] else 0):
             x, y, psi, u, v, r = (
                 state[b, j, 0],
                 state[b, j, 1],
@@ -229,7 +263,8 @@ def _kernel(  # type: ignore[no-untyped-def]
             for i in range(j + 1, n):
                 d = np.hypot(sx - state[b, i, 0], sy - state[b, i, 1])
                 min_sep = min(min_sep, d)
-        collision = min_sep < safety
+        collision = min_sep < safety and not restart[b]
+        out_of_bounds = out_of_bounds and not restart[b]
         terminated = collision or out_of_bounds
         flags[b, 0] = collision
         flags[b, 1] = out_of_bounds
@@ -241,9 +276,9 @@ def _kernel(  # type: ignore[no-untyped-def]
             theta_j, xdot_j = theta[b, j], xdot[b, j]
             psi_w = wrap_angle(state[b, j, 2])
             own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b])
-            for f in range(OWN_SIZE):
+            for f in range(OWN_SIZE if not channel_on else 0):
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
-            for kk in range(n - 1):
+            for kk in range(n - 1 if not channel_on else 0):
                 i = slot_index[j, kk]
                 base = OWN_SIZE + SLOT_SIZE * kk
                 link = slot_mask[j, kk]
@@ -264,8 +299,175 @@ def _kernel(  # type: ignore[no-untyped-def]
             comps[5, b, j] = terminal_term(terminated, terminal_penalty, time_left[b])
             total = 0.0
             for c in range(6):
+                if restart[b]:  # the first output of an episode carries no reward
+                    comps[c, b, j] = 0.0
                 total += comps[c, b, j]
             reward[b, j] = total
+        if channel_on:  # the observations through the channel (theta, xdot rows of b are free now)
+            _channel_instant(
+                b,
+                state,
+                time1,
+                steps,
+                restart,
+                u_d,
+                u_d_rate,
+                (
+                    (has_noise, c_normals, c_npos, c_scale, c_measured),
+                    (has_current, c_current),
+                    c_offsets,
+                    c_rule,
+                    c_graphs,
+                    c_ends,
+                    c_loss,
+                    c_uniforms,
+                    c_upos,
+                    (c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx),
+                    (c_pvalid, c_ptheta, c_pxdot, c_ptime),
+                    (c_slots, c_low, c_high),
+                ),
+                obs,
+                theta,
+                xdot,
+            )
+
+
+@njit(inline="always")
+def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, theta, xdot):  # type: ignore[no-untyped-def]
+    """One control instant of the channel for formation ``b``, right after its step (non-ideal links).
+
+    The numpy path's ``FormationCore._sense`` (and, for a restarting formation,
+    :meth:`~marine_formation_env.channel.LinkChannel.reset` first),
+    :meth:`~marine_formation_env.channel.LinkChannel.update` and ``observe``,
+    in the same order and reading the same rows of uniforms and normals.
+    """
+    (noise, sea, offsets, rule, graphs, ends, loss, uniforms, upos, link, pending, bounds) = chan
+    has_noise, normals, npos, scale, measured = noise
+    has_current, current = sea
+    (tdma, every, with_failure, p_fail, p_recover, with_burst, p_gb, p_bg, p_bad, loss_good, loss_bad,
+     latency, jitter, with_delay, max_delay_steps, depth, dt, link_range, with_range) = rule
+    up, has_message, held_theta, held_xdot, held_time, failed, bad, transmitted = link
+    pend_valid, pend_theta, pend_xdot, pend_time = pending
+    slot_index, obs_low, obs_high = bounds
+    n = state.shape[1]
+    nn = n * n
+    # which part of a row of uniforms holds which draw: failure, Gilbert-Elliott, loss, jitter
+    d_fail = 0
+    d_burst = d_fail + (1 if with_failure else 0)
+    d_loss = d_burst + (1 if with_burst else 0)
+    d_jitter = d_loss + 1
+    t = time1[b]
+    step = steps[b]
+    if restart[b]:  # LinkChannel.reset: no messages, every link live, chains stationary
+        for j in range(n):
+            transmitted[b, j] = False
+            for i in range(n):
+                up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
+                held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
+                for d in range(depth):
+                    pend_valid[d, b, j, i] = False
+        if with_burst:
+            r0 = uniforms[b, upos[b]]
+            upos[b] += 1
+            for k in range(nn):
+                bad[b, k // n, k % n] = r0[k] < p_bad
+    # ---- what each vessel measures of itself
+    if has_noise:
+        row = npos[b]
+        for j in range(n):
+            for c in range(6):
+                measured[b, j, c] = state[b, j, c] + normals[b, row, 6 * j + c] * scale[c]
+        npos[b] = row + 1
+    m = measured if has_noise else state
+    vc_x = 0.0
+    if has_current:
+        vc_x = current_velocity(current[0], current[1], current[2], current[3], current[4], t)[0]
+    for j in range(n):
+        theta[b, j], xdot[b, j] = along_track(m[b, j, 0], offsets[j, 0], m[b, j, 2], m[b, j, 3], m[b, j, 4])
+        if has_current:
+            xdot[b, j] += vc_x
+    # ---- link states, transmissions, losses, delays
+    g = 0
+    if graphs.shape[0] > 1:
+        phase = (t + 1e-9) % ends[-1]
+        while g < ends.shape[0] and ends[g] <= phase:
+            g += 1
+    draws = with_failure  # a row of uniforms only when something random happens (LinkChannel.draws_at)
+    for i in range(n):
+        if tdma:
+            transmitted[b, i] = step % (n * every) == i * every
+        else:
+            transmitted[b, i] = step % every == 0
+        draws = draws or transmitted[b, i]
+    r = uniforms[b, upos[b]]  # not read (and not consumed) without draws
+    if draws:
+        upos[b] += 1
+    for j in range(n):
+        for i in range(n):
+            k = j * n + i
+            alive = graphs[g, j, i]
+            if with_range and alive:
+                alive = in_range(state[b, j, 0] - state[b, i, 0], state[b, j, 1] - state[b, i, 1], link_range)
+            if with_failure:
+                u_f = r[d_fail * nn + k]
+                if step == 0:  # every link is live at reset
+                    down = False
+                elif failed[b, j, i]:
+                    down = u_f >= p_recover
+                else:
+                    down = u_f < p_fail
+                failed[b, j, i] = down
+                alive = alive and not down
+            up[b, j, i] = alive
+            send = alive and transmitted[b, i]
+            if not send:
+                continue
+            if with_burst:
+                u_b = r[d_burst * nn + k]
+                in_bad = u_b >= p_bg if bad[b, j, i] else u_b < p_gb
+                bad[b, j, i] = in_bad
+                p_loss = loss_bad if in_bad else loss_good
+            else:
+                p_loss = loss[j, i]
+            if r[d_loss * nn + k] < p_loss:
+                continue
+            delay_steps = 0
+            if with_delay:
+                delay = latency + (jitter * r[d_jitter * nn + k] if jitter > 0 else 0.0)
+                delay_steps = math.ceil(delay / dt - 1e-9)
+            if delay_steps <= max_delay_steps:  # later than the episode's end: never seen
+                slot = (step + delay_steps) % depth
+                pend_valid[slot, b, j, i] = True
+                pend_theta[slot, b, j, i] = theta[b, i]
+                pend_xdot[slot, b, j, i] = xdot[b, i]
+                pend_time[slot, b, j, i] = t
+    # ---- arrivals at this instant (zero-delay messages sent just now included)
+    now = step % depth
+    for j in range(n):
+        for i in range(n):
+            if pend_valid[now, b, j, i]:
+                if not has_message[b, j, i] or pend_time[now, b, j, i] > held_time[b, j, i]:
+                    held_theta[b, j, i] = pend_theta[now, b, j, i]
+                    held_xdot[b, j, i] = pend_xdot[now, b, j, i]
+                    held_time[b, j, i] = pend_time[now, b, j, i]
+                    has_message[b, j, i] = True
+                pend_valid[now, b, j, i] = False
+    # ---- observations: own measurement, and the held messages through the links up now
+    for j in range(n):
+        own = (m[b, j, 1] - offsets[j, 1], wrap_angle(m[b, j, 2]), m[b, j, 3], m[b, j, 4], m[b, j, 5],
+               u_d[b], u_d_rate[b])
+        for f in range(OWN_SIZE):
+            obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
+        for kk in range(n - 1):
+            i = slot_index[j, kk]
+            base = OWN_SIZE + SLOT_SIZE * kk
+            if up[b, j, i] and has_message[b, j, i]:
+                feats = (1.0, theta[b, j] - held_theta[b, j, i], xdot[b, j] - held_xdot[b, j, i],
+                         t - held_time[b, j, i])
+            else:
+                feats = (0.0, 0.0, 0.0, 0.0)
+            for f in range(SLOT_SIZE):
+                obs[b, j, base + f] = _clip(feats[f], obs_low[base + f], obs_high[base + f])
 
 
 def _renamed(fn: Any, name: str) -> Any:
@@ -280,12 +482,13 @@ def source_key() -> str:
 
     numba's on-disk cache is invalidated only when the file that holds the
     jitted function changes, not when a function it calls from another module
-    does. The kernel's name carries this digest, so an edit of a rule in
-    :mod:`~marine_formation_env.rules` (or of the model or a controller)
+    does. The kernels' names carry this digest, so an edit of a rule in
+    :mod:`~marine_formation_env.rules` (or of the model, a controller or the
+    channel's :func:`~marine_formation_env.channel.in_range`)
     compiles a new kernel instead of loading a stale one from the cache.
     """
     digest = hashlib.sha256()
-    for module in (dynamics, control, rules):
+    for module in (dynamics, control, rules, channel_module):
         digest.update(inspect.getsource(module).encode())
     return digest.hexdigest()[:16]
 
@@ -308,8 +511,18 @@ class StepKernel:
 
     Everything the kernel needs that does not change between steps (the
     vessel, the gains, the level, the limits, the reward weights, the
-    observation bounds and slot geometry) is packed at construction;
-    :meth:`run` passes the per-step arrays.
+    observation bounds and slot geometry, the channel's constants) is packed
+    at construction; :meth:`run` passes the per-step arrays.
+
+    With non-ideal links (``channel`` given) the same kernel also runs the
+    channel's control instant for each formation right after its step, on the
+    arrays of the core's :class:`~marine_formation_env.channel.LinkChannel`
+    and :class:`~marine_formation_env.disturbances.SensorNoiseSource` in place:
+    the numpy path (which still serves
+    :meth:`~marine_formation_env.core.FormationCore.reset`) and the kernel
+    share one channel state, and the kernel reads their block streams of
+    uniforms and normals row by row, as their ``take`` does, so both draw the
+    same numbers in the same order.
     """
 
     def __init__(
@@ -320,6 +533,9 @@ class StepKernel:
         slot_mask: np.ndarray,
         obs_low: np.ndarray,
         obs_high: np.ndarray,
+        channel: Any = None,
+        sensor_noise: Any = None,
+        measured: np.ndarray | None = None,
     ) -> None:
         coeffs, gains = coefficients(config)
         w = config.reward
@@ -351,6 +567,16 @@ class StepKernel:
             config.max_speed,
             config.max_yaw_rate,
         )
+        self.channel, self.sensor_noise = channel, sensor_noise
+        if channel is None:  # placeholders of the same types: one compiled kernel serves both cases
+            ideal = [(math.inf, np.eye(config.n_vessels))]
+            placeholder = channel_module.LinkChannel(
+                channel_module.ChannelConfig(), config.n_vessels, config.dt, ideal, max_steps=1, num_envs=1
+            )
+            self.chan = channel_args(config, placeholder, None, None, slot_index, obs_low, obs_high)
+        else:
+            self.chan = channel_args(config, channel, sensor_noise, measured, slot_index, obs_low, obs_high)
+        self._scratch = (np.empty((num_envs, config.n_vessels)), np.empty((num_envs, config.n_vessels)))
 
     def run(
         self,
@@ -360,16 +586,23 @@ class StepKernel:
         time0: np.ndarray,
         steer_dy: np.ndarray,
         time1: np.ndarray,
+        steps: np.ndarray,
         actions: np.ndarray,
+        restart: np.ndarray,
+        initial: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Advance ``state`` ``(B, N, 6)`` in place by one control period.
+        """Advance ``state`` ``(B, N, 6)`` in place by one control period (and the channel, if any).
 
         Args:
             commands: ``(B, N, 2)`` physical commands: (τ_u, τ_r) | (u_c, ψ_d) | (u_c, 0).
             last_u_c: ``(B, N)`` the previous period's u_c (first-order hold).
             time0, time1: ``(B,)`` time at the start and at the end of the period [s].
             steer_dy: ``(B, N)`` the path offset the built-in LOS steers to.
+            steps: ``(B,)`` control periods since reset at the end of the period.
             actions: ``(B, N, A)`` the clipped normalized actions (effort term).
+            restart: ``(B,)`` formations that start anew from ``initial`` ``(B, N, 6)``
+                instead of stepping (zero reward, no flags; ``time1`` and
+                ``steps`` are 0 for them; their channel is reset first).
 
         Returns:
             ``(observation (B, N, D) float32, components (6, B, N), reward (B, N),
@@ -381,6 +614,13 @@ class StepKernel:
         comps = np.empty((6, b, n))
         flags = np.empty((b, 2), dtype=np.bool_)
         reward = np.empty((b, n))
+        if self.channel is not None:
+            uniforms = self.channel.uniforms
+            uniforms.refill()  # an unread row for every formation ...
+            if self.channel.channel.burst is not None and restart.any():
+                uniforms.refill(np.flatnonzero(restart), rows=2)  # ... and one more where the chains restart
+            if self.sensor_noise is not None:
+                self.sensor_noise.normals.refill()
         self.kernel(
             state,
             commands,
@@ -399,7 +639,76 @@ class StepKernel:
             comps,
             reward,
             flags,
-            np.empty((b, n)),
-            np.empty((b, n)),
+            *self._scratch,
+            restart,
+            initial,
+            time1,
+            steps,
+            self.channel is not None,
+            self.chan,
         )
         return obs, comps, reward, flags
+
+
+def channel_args(
+    config: Any,
+    channel: Any,
+    sensor_noise: Any,
+    measured: np.ndarray | None,
+    slot_index: np.ndarray,
+    obs_low: np.ndarray,
+    obs_high: np.ndarray,
+) -> tuple[Any, ...]:
+    """The channel's part of the kernel's arguments: constants, and the state arrays it updates in place."""
+    ch = channel.channel
+    n = channel.n
+    burst = ch.burst
+    if sensor_noise is not None:
+        normals = sensor_noise.normals
+        noise = (True, normals.buffer, normals.pos, sensor_noise.scale, measured)
+    else:
+        noise = (False, np.empty((1, 1, 6 * n)), np.zeros(1, dtype=np.int64), np.zeros(6), np.empty((1, n, 6)))
+    rule = (
+        channel.tdma,
+        int(channel.every),
+        ch.failure_rate > 0 or ch.recovery_rate > 0,
+        float(channel.p_fail),
+        float(channel.p_recover),
+        burst is not None,
+        0.0 if burst is None else float(burst.p_good_to_bad),
+        0.0 if burst is None else float(burst.p_bad_to_good),
+        0.0 if burst is None else float(burst.p_bad),
+        0.0 if burst is None else float(burst.loss_good),
+        0.0 if burst is None else float(burst.loss_bad),
+        float(ch.latency),
+        float(ch.jitter),
+        ch.max_delay > 0,
+        int(channel.max_delay_steps),
+        int(channel.depth),
+        float(channel.dt),
+        float(ch.range),
+        math.isfinite(ch.range),
+    )
+    return (
+        noise,
+        (not config.current.is_zero, np.array(config.current.coefficients, dtype=float)),
+        np.ascontiguousarray(config.formation),
+        rule,
+        np.ascontiguousarray(channel.graphs),
+        np.asarray(channel.ends, dtype=float),
+        np.ascontiguousarray(np.broadcast_to(np.asarray(channel.loss_matrix, dtype=float), (n, n))),
+        channel.uniforms.buffer,
+        channel.uniforms.pos,
+        (
+            channel.up,
+            channel.has_message,
+            channel.held_theta,
+            channel.held_xdot,
+            channel.held_time,
+            channel.failed,
+            channel.bad,
+            channel.transmitted,
+        ),
+        (channel.pend_valid, channel.pend_theta, channel.pend_xdot, channel.pend_time),
+        (slot_index, obs_low, obs_high),
+    )

@@ -60,7 +60,18 @@ import numpy as np
 from marine_formation_env.errors import ConfigError, build_config, check_number, whole_periods
 from marine_formation_env.streams import BlockStream, channel_streams
 
-__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams"]  # streams re-exported
+# BlockStream and channel_streams are re-exported from marine_formation_env.streams
+__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams", "in_range"]
+
+
+def in_range(dx: Any, dy: Any, link_range: float) -> Any:
+    """Whether two vessels ``(dx, dy)`` [m] apart are within ``link_range`` [m] of each other.
+
+    Compares squared distances: no square root, and the same arithmetic on
+    both backends (the compiled channel calls this function too).
+    """
+    return dx * dx + dy * dy <= link_range * link_range
+
 
 def _probability(owner: str, key: str, value: Any) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 <= value <= 1.0):
@@ -226,6 +237,14 @@ class LinkChannel:
         held_theta, held_xdot, held_time: the held message: ``θ_i = x_i − D_xi``
             [m], inertial ``ẋ_i`` [m/s], and its send time [s].
         transmitted: ``(B, N)`` which vessels transmitted at the last update.
+        failed, bad: ``(B, N, N)`` the link has failed; its Gilbert–Elliott chain is bad.
+        pend_valid, pend_theta, pend_xdot, pend_time: ``(depth, B, N, N)`` the
+            messages on their way, by arrival slot ``step mod depth``.
+        graphs, ends: the schedule's adjacencies ``(G, N, N)`` and the end of
+            each dwell within one cycle [s].
+        tdma, every: TDMA on; control periods per slot (TDMA) or per transmission.
+        p_fail, p_recover: per-period failure and recovery probabilities.
+        loss_matrix: the Bernoulli loss (a probability or an ``(N, N)`` matrix).
     """
 
     def __init__(
@@ -256,13 +275,13 @@ class LinkChannel:
         # arrive after the episode's last step is never seen, so delays are capped there
         self.max_delay_steps = min(math.ceil(ch.max_delay / self.dt - 1e-9), max_steps)
         self.depth = self.max_delay_steps + 1
-        self._graphs = np.stack([np.asarray(adjacency, dtype=bool) for _, adjacency in schedule])
-        self._ends = np.cumsum([dwell for dwell, _ in schedule])
-        self._tdma = ch.tdma_slot is not None
-        self._every = ch.slot_steps(self.dt) if self._tdma else ch.period_steps(self.dt)
-        self._p_fail = -math.expm1(-ch.failure_rate * self.dt)
-        self._p_recover = -math.expm1(-ch.recovery_rate * self.dt)
-        self._loss: Any = np.asarray(ch.loss) if isinstance(ch.loss, tuple) else ch.loss
+        self.graphs = np.stack([np.asarray(adjacency, dtype=bool) for _, adjacency in schedule])
+        self.ends = np.cumsum([dwell for dwell, _ in schedule])
+        self.tdma = ch.tdma_slot is not None
+        self.every = ch.slot_steps(self.dt) if self.tdma else ch.period_steps(self.dt)
+        self.p_fail = -math.expm1(-ch.failure_rate * self.dt)
+        self.p_recover = -math.expm1(-ch.recovery_rate * self.dt)
+        self.loss_matrix: Any = np.asarray(ch.loss) if isinstance(ch.loss, tuple) else ch.loss
         shape = (b, n, n)
         self.up = np.zeros(shape, dtype=bool)
         self.has_message = np.zeros(shape, dtype=bool)
@@ -273,10 +292,10 @@ class LinkChannel:
         self.bad = np.zeros(shape, dtype=bool)
         self.transmitted = np.zeros((b, n), dtype=bool)
         deep = (self.depth, *shape)
-        self._pend_valid = np.zeros(deep, dtype=bool)
-        self._pend_theta = np.zeros(deep)
-        self._pend_xdot = np.zeros(deep)
-        self._pend_time = np.zeros(deep)
+        self.pend_valid = np.zeros(deep, dtype=bool)
+        self.pend_theta = np.zeros(deep)
+        self.pend_xdot = np.zeros(deep)
+        self.pend_time = np.zeros(deep)
         self.uniforms = BlockStream(b, self.draws_per_link * n * n)
 
     # ------------------------------------------------------------------ draws
@@ -290,6 +309,30 @@ class LinkChannel:
         """Give formation ``b`` a new stream of uniforms (the first of :func:`channel_streams`)."""
         self.uniforms.seed(b, generator)
 
+    def draws_at(self, transmitting: np.ndarray) -> np.ndarray:
+        """Which formations draw a row of uniforms at a control instant, given ``(m, N)`` transmitters.
+
+        A formation draws one row at an instant when a vessel of it transmits
+        (the loss, Gilbert–Elliott and jitter draws of its links) or when
+        links can fail (the failure draw of every link); otherwise nothing
+        random happens and its stream is left untouched.
+        """
+        ch = self.channel
+        if ch.failure_rate > 0 or ch.recovery_rate > 0:
+            return np.ones(len(transmitting), dtype=bool)
+        return np.asarray(transmitting.any(axis=1))
+
+    def _instant_uniforms(self, ids: np.ndarray, transmitting: np.ndarray) -> np.ndarray:
+        """``(draws_per_link, len(ids), N, N)``: a row of uniforms for each formation that draws
+        (:meth:`draws_at`); the others' entries are never read (nothing is sent, no link can fail)."""
+        need = self.draws_at(transmitting)
+        if need.all():
+            return self._uniforms(ids)
+        out = np.ones((self.draws_per_link, len(ids), self.n, self.n))
+        if need.any():
+            out[:, need] = self._uniforms(ids[need])
+        return out
+
     def _uniforms(self, ids: np.ndarray) -> np.ndarray:
         """``(draws_per_link, len(ids), N, N)`` uniforms: one row of each formation's stream."""
         rows = self.uniforms.take(ids).reshape(len(ids), self.draws_per_link, self.n, self.n)
@@ -298,17 +341,17 @@ class LinkChannel:
     # ----------------------------------------------------------------- update
     def graph_at(self, time: np.ndarray) -> np.ndarray:
         """``(len(time), N, N)`` adjacency of the communication graph at each time [s]."""
-        if len(self._graphs) == 1:
-            return np.broadcast_to(self._graphs[0], (len(time), self.n, self.n))
-        phase = np.mod(np.asarray(time) + 1e-9, self._ends[-1])
-        return self._graphs[np.searchsorted(self._ends, phase, side="right")]
+        if len(self.graphs) == 1:
+            return np.broadcast_to(self.graphs[0], (len(time), self.n, self.n))
+        phase = np.mod(np.asarray(time) + 1e-9, self.ends[-1])
+        return self.graphs[np.searchsorted(self.ends, phase, side="right")]
 
     def transmitters(self, steps: np.ndarray) -> np.ndarray:
         """``(len(steps), N)`` which vessels transmit at control instant ``steps``."""
         steps = np.asarray(steps)[:, None]
-        if self._tdma:
-            return np.mod(steps, self.n * self._every) == np.arange(self.n) * self._every
-        return np.broadcast_to(np.mod(steps, self._every) == 0, (len(steps), self.n))
+        if self.tdma:
+            return np.mod(steps, self.n * self.every) == np.arange(self.n) * self.every
+        return np.broadcast_to(np.mod(steps, self.every) == 0, (len(steps), self.n))
 
     def reset(self, ids: np.ndarray) -> None:
         """Forget everything of formations ``ids``: no messages, every link live, chains stationary."""
@@ -316,7 +359,7 @@ class LinkChannel:
             arr[ids] = False
         for arr in (self.held_theta, self.held_xdot, self.held_time):
             arr[ids] = 0.0
-        self._pend_valid[:, ids] = False
+        self.pend_valid[:, ids] = False
         burst = self.channel.burst
         if burst is not None:
             self.bad[ids] = self._uniforms(ids)[0] < burst.p_bad
@@ -342,20 +385,20 @@ class LinkChannel:
         """
         ch = self.channel
         rows = self._rows(ids)
-        draws = iter(self._uniforms(ids))
+        tx = self.transmitters(steps)
+        draws = iter(self._instant_uniforms(ids, tx))
         up = self.graph_at(time).copy()
         if math.isfinite(ch.range):
             gap = positions[:, :, None, :] - positions[:, None, :, :]
-            up &= np.hypot(gap[..., 0], gap[..., 1]) <= ch.range
+            up &= in_range(gap[..., 0], gap[..., 1], ch.range)
         if ch.failure_rate > 0 or ch.recovery_rate > 0:
             r = next(draws)
             failed = self.failed[rows]
             fresh = (np.asarray(steps) == 0)[:, None, None]  # every link is live at reset
-            failed = np.where(fresh, False, np.where(failed, r >= self._p_recover, r < self._p_fail))
+            failed = np.where(fresh, False, np.where(failed, r >= self.p_recover, r < self.p_fail))
             self.failed[rows] = failed
             up &= ~failed
         self.up[rows] = up
-        tx = self.transmitters(steps)
         self.transmitted[rows] = tx
         send = up & tx[:, None, :]
         if ch.burst is not None:
@@ -366,7 +409,7 @@ class LinkChannel:
             self.bad[rows] = bad
             p_loss: Any = np.where(bad, ch.burst.loss_bad, ch.burst.loss_good)
         else:
-            p_loss = self._loss
+            p_loss = self.loss_matrix
         delivered = send & (next(draws) >= p_loss)
         delay = ch.latency + (ch.jitter * next(draws) if ch.jitter > 0 else 0.0)
         delay_steps = np.ceil(delay / self.dt - 1e-9).astype(np.int64) if ch.max_delay > 0 else 0
@@ -376,25 +419,25 @@ class LinkChannel:
         if sel_b.size:
             slot = np.broadcast_to(arrival_slot, delivered.shape)[sel_b, sel_j, sel_i]
             where = (slot, ids[sel_b], sel_j, sel_i)
-            self._pend_valid[where] = True
-            self._pend_theta[where] = theta[sel_b, sel_i]
-            self._pend_xdot[where] = xdot[sel_b, sel_i]
-            self._pend_time[where] = time[sel_b]
+            self.pend_valid[where] = True
+            self.pend_theta[where] = theta[sel_b, sel_i]
+            self.pend_xdot[where] = xdot[sel_b, sel_i]
+            self.pend_time[where] = time[sel_b]
         # arrivals at this instant (zero-delay messages sent just now included)
         k = np.mod(steps, self.depth)
         now: tuple[Any, Any] = (int(k[0]), rows) if k.min() == k.max() else (k, ids)  # a view when in step
-        arrived = self._pend_valid[now]
+        arrived = self.pend_valid[now]
         if arrived.any():
             has, held_time = self.has_message[rows], self.held_time[rows]
-            newer = arrived & (~has | (self._pend_time[now] > held_time))
+            newer = arrived & (~has | (self.pend_time[now] > held_time))
             for held, pend in (
-                (self.held_theta, self._pend_theta),
-                (self.held_xdot, self._pend_xdot),
-                (self.held_time, self._pend_time),
+                (self.held_theta, self.pend_theta),
+                (self.held_xdot, self.pend_xdot),
+                (self.held_time, self.pend_time),
             ):
                 held[rows] = np.where(newer, pend[now], held[rows])
             self.has_message[rows] = has | newer
-            self._pend_valid[now] = False
+            self.pend_valid[now] = False
 
     def _rows(self, ids: np.ndarray) -> Any:
         """Index of formations ``ids`` (distinct, increasing): a slice (views, no copies) when it is all of them."""

@@ -7,7 +7,8 @@ steps of the closed loop (the built-in inner controllers of the action level
 are part of the vector field, so they act at every RK4 stage), then compute
 the masked observations, rewards, terminations and truncations as arrays, with
 the per-element rules of :mod:`~marine_formation_env.rules`. The numba backend
-(:mod:`~marine_formation_env._numba`) runs the same step as one fused kernel.
+(:mod:`~marine_formation_env._numba`) runs the same step, channel and
+autoreset (``step(restart=…)``) included, as one fused kernel.
 
 Everything else has its own home: the observation layout and bounds
 (:mod:`~marine_formation_env.observations`), the action maps and spaces
@@ -209,11 +210,22 @@ class FormationCore:
         self._los_sigma = config.los_integral_gain
         self.los_integral = np.zeros((self.num_envs, n))  # e_int of integral LOS [s] (speed level)
         self._kernel: Any = None
+        self._no_starts = np.empty((self.num_envs, n, 6))  # the kernel's initial states when nothing restarts
         if self.backend == "numba":
             from marine_formation_env import _numba
 
+            if self.sensor_noise is not None:
+                self._measured = self.state.copy()  # the kernel writes the measurements here
             self._kernel = _numba.StepKernel(
-                config, self.num_envs, self._slot_index, self._slot_mask, self.obs_low, self.obs_high
+                config,
+                self.num_envs,
+                self._slot_index,
+                self._slot_mask,
+                self.obs_low,
+                self.obs_high,
+                self.channel,
+                self.sensor_noise,
+                self._measured,
             )
 
     @property
@@ -278,12 +290,24 @@ class FormationCore:
         self.channel.update(ids, self.steps[ids], time, theta, x_dot, self.state[ids][..., :2])
 
     # ------------------------------------------------------------------- step
-    def step(self, actions: np.ndarray) -> StepOutput:
-        """Advance every formation by one control period.
+    def step(
+        self, actions: np.ndarray, restart: np.ndarray | None = None, initial_state: np.ndarray | None = None
+    ) -> StepOutput:
+        """Advance every formation by one control period, or restart some of them (autoreset).
+
+        Formations in ``restart`` start a new episode from ``initial_state``
+        instead of stepping, exactly as :meth:`reset` would start it: their
+        actions are ignored and their output is the new episode's first
+        observation, with zero reward and nothing terminated or truncated.
+        The compiled backend does this inside its kernel, so formations that
+        end at different times cost no extra pass.
 
         Args:
             actions: ``(B, N, A)`` normalized actions; finite values outside
                 [−1, 1] are clipped.
+            restart: ``(B,)`` booleans, or None (no formation restarts).
+            initial_state: ``(number restarting, N, 6)`` their initial states,
+                in formation order (required with ``restart``).
 
         Raises:
             ValueError: wrong shape or a non-finite entry (named by index).
@@ -295,6 +319,10 @@ class FormationCore:
             raise ValueError(
                 f"actions must have shape {expected} (formations, vessels, action dim), got {actions.shape}"
             )
+        restart_ids, initial = self._restarts(restart, initial_state)
+        if len(restart_ids):
+            actions = actions.copy()
+            actions[restart_ids] = 0.0  # ignored
         if not np.all(np.isfinite(actions)):
             bad = tuple(int(i) for i in np.argwhere(~np.isfinite(actions))[0])
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
@@ -307,7 +335,7 @@ class FormationCore:
             self._fresh[:] = False
         e_start = self.state[..., Y] - self._dy if self._los_sigma > 0 else None
         if self._kernel is not None:
-            out = self._step_compiled(clipped, commands)
+            out = self._step_compiled(clipped, commands, restart_ids, initial)
         else:
             rhs = self.closed_loop(commands)
             h = cfg.dt / cfg.substeps
@@ -317,15 +345,50 @@ class FormationCore:
             self.state = state
             self.time = self.time + cfg.dt
             self.steps = self.steps + 1
+            self._restart(restart_ids, initial)
             if self.channel is not None:
                 self._sense(np.arange(self.num_envs))
             out = self._outputs(clipped, commands.get("u_c"))
+            if len(restart_ids):  # the first output of an episode: no reward, nothing ended
+                for field in (out.reward, out.terminated, out.truncated, out.collision, out.out_of_bounds):
+                    field[restart_ids] = 0
+                for value in out.components.values():
+                    value[restart_ids] = 0.0
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
         if e_start is not None:  # integral LOS: one Euler step of its integrator per control period
             rate = integral_los_rate(e_start, self.los_integral, self._los_sigma, cfg.gains.delta)
             self.los_integral = self.los_integral + cfg.dt * rate
+        if len(restart_ids):
+            self._fresh[restart_ids] = True  # their first command is held, not ramped
+            self.los_integral[restart_ids] = 0.0
         return out
+
+    def _restarts(self, restart: np.ndarray | None, initial_state: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Check ``step``'s autoreset arguments: the restarting formations' indices and initial states."""
+        if restart is None:
+            if initial_state is not None:
+                raise ValueError("step got an initial_state without restart (which formations start anew?)")
+            return np.empty(0, dtype=np.intp), np.empty((0, self.n, 6))
+        mask = np.asarray(restart)
+        if mask.dtype != bool or mask.shape != (self.num_envs,):
+            raise ValueError(f"restart must be ({self.num_envs},) booleans, got {mask.dtype} {mask.shape}")
+        ids = np.flatnonzero(mask)
+        if initial_state is None:
+            if len(ids):
+                raise ValueError(f"step needs the initial_state of the {len(ids)} restarting formation(s)")
+            return ids, np.empty((0, self.n, 6))
+        return ids, checked_array(initial_state, "initial_state", [(len(ids), self.n, 6)], hint=COLUMNS_HINT)
+
+    def _restart(self, ids: np.ndarray, initial: np.ndarray) -> None:
+        """Start formations ``ids`` anew from ``initial`` (time 0, step 0; the channel forgets everything)."""
+        if not len(ids):
+            return
+        self.state[ids] = initial
+        self.time[ids] = 0.0
+        self.steps[ids] = 0
+        if self.channel is not None:
+            self.channel.reset(ids)
 
     def _steer_dy(self) -> np.ndarray:
         """The path offset the speed level's LOS steers to: ``D_y``, or ``D_y − σ·e_int`` (integral LOS).
@@ -336,8 +399,10 @@ class FormationCore:
             return self._dy - self._los_sigma * self.los_integral  # type: ignore[no-any-return]
         return self._steer_dy_plain
 
-    def _step_compiled(self, actions: np.ndarray, commands: dict[str, np.ndarray]) -> StepOutput:
-        """The same step as the numpy path, in one fused numba kernel (``backend="numba"``)."""
+    def _step_compiled(
+        self, actions: np.ndarray, commands: dict[str, np.ndarray], restart_ids: np.ndarray, initial: np.ndarray
+    ) -> StepOutput:
+        """The same step as the numpy path, channel included, in one fused numba kernel (``backend="numba"``)."""
         cfg = self.config
         b, n = self.num_envs, self.n
         cmd = np.zeros((b, n, 2))
@@ -350,12 +415,16 @@ class FormationCore:
         time0, steer_dy = self.time, self._steer_dy()
         self.time = self.time + cfg.dt
         self.steps = self.steps + 1
+        restart = np.zeros(b, dtype=bool)
+        starts = np.empty((b, n, 6)) if len(restart_ids) else self._no_starts
+        if len(restart_ids):
+            restart[restart_ids] = True
+            starts[restart_ids] = initial
+            self.time[restart_ids] = 0.0
+            self.steps[restart_ids] = 0
         obs, comps, reward, flags = self._kernel.run(
-            self.state, cmd, self._last_u_c, time0, steer_dy, self.time, actions
+            self.state, cmd, self._last_u_c, time0, steer_dy, self.time, self.steps, actions, restart, starts
         )
-        if self.channel is not None:  # the kernel's slots are those of ideal links
-            self._sense(np.arange(b))
-            obs = self.observe()
         components = dict(zip(REWARD_COMPONENTS, comps, strict=True))
         terminated = flags[:, 0] | flags[:, 1]
         return StepOutput(

@@ -126,7 +126,7 @@ class SensorNoiseSource:
 
     def __init__(self, noise: SensorNoise, n: int, num_envs: int) -> None:
         self.n = n
-        self._scale = noise.as_array()
+        self.scale = noise.as_array()
         self.normals = BlockStream(num_envs, 6 * n, normal=True)
 
     def seed(self, b: int, generator: np.random.Generator) -> None:
@@ -135,4 +135,4 @@ class SensorNoiseSource:
 
     def draw(self, ids: np.ndarray) -> np.ndarray:
         """``(len(ids), N, 6)`` noise on the state columns ``x, y, psi, u, v, r`` of formations ``ids``."""
-        return self.normals.take(ids).reshape(len(ids), self.n, 6) * self._scale
+        return self.normals.take(ids).reshape(len(ids), self.n, 6) * self.scale

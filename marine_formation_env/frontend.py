@@ -60,6 +60,7 @@ __all__ = [
     "read_reset",
     "resolve_config",
     "vessel_infos",
+    "vessel_mean",
 ]
 
 #: The keys ``reset(options=…)`` understands.
@@ -192,6 +193,22 @@ def read_reset(
 # ---------------------------------------------------------------------------- infos
 
 
+def vessel_mean(values: np.ndarray) -> np.ndarray:
+    """The mean over the vessels (axis 1) of ``(B, N, …)`` values, summed vessel by vessel.
+
+    Every front end averages the vessels with this one function (the team
+    reward, the per-formation reward components), so they agree bit for bit
+    whatever the batch size. It is also several times faster than
+    ``values.mean(axis=1)`` on ``(B, N)`` arrays with few vessels, where
+    numpy's reduction pays per row.
+    """
+    total = np.array(values[:, 0], dtype=np.float64)
+    for j in range(1, values.shape[1]):
+        total += values[:, j]
+    total /= values.shape[1]
+    return total
+
+
 def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     """The per-vessel info schema (module docstring) as ``(B, N)`` arrays."""
     n = out.reward.shape[1]
@@ -210,7 +227,7 @@ def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     """The per-formation info schema (module docstring) as arrays with a leading ``(B,)`` axis."""
     infos: dict[str, Any] = {
         "vessel_rewards": np.array(out.reward, dtype=np.float64),
-        "reward_components": {key: np.mean(value, axis=1) for key, value in out.components.items()},
+        "reward_components": {key: vessel_mean(value) for key, value in out.components.items()},
         "time": np.array(time, dtype=np.float64),
         "collision": np.array(out.collision, dtype=bool),
         "out_of_bounds": np.array(out.out_of_bounds, dtype=bool),

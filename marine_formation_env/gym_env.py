@@ -34,7 +34,14 @@ import numpy as np
 from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import Rendering, formation_infos, one_entry, read_reset, resolve_config
+from marine_formation_env.frontend import (
+    Rendering,
+    formation_infos,
+    one_entry,
+    read_reset,
+    resolve_config,
+    vessel_mean,
+)
 from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
@@ -100,7 +107,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._done = terminated or truncated
         if self.render_mode == "human":
             self.render()
-        reward = float(out.reward[0].mean())
+        reward = float(vessel_mean(out.reward)[0])
         return out.observation[0].reshape(-1), reward, terminated, truncated, self._info(out)
 
     def render(self) -> np.ndarray | None:

@@ -45,13 +45,13 @@ class BlockStream:
         num_envs: formations ``B``.
         width: numbers per row.
         normal: standard normals instead of uniforms in [0, 1).
-        max_floats: buffer budget; ``block = clip(max_floats // (B·width), 1, 64)``.
+        max_floats: buffer budget; ``block = clip(max_floats // (B·width), 2, 64)``.
     """
 
     def __init__(self, num_envs: int, width: int, normal: bool = False, max_floats: int = 4_000_000) -> None:
         self.width = width
         self.normal = normal
-        self.block = int(np.clip(max_floats // max(1, num_envs * width), 1, 64))
+        self.block = int(np.clip(max_floats // max(1, num_envs * width), 2, 64))
         self.generators = [np.random.default_rng() for _ in range(num_envs)]
         self.buffer = np.empty((num_envs, self.block, width))
         self.pos = np.full(num_envs, self.block)  # every block starts empty
@@ -61,13 +61,32 @@ class BlockStream:
         self.generators[b] = generator
         self.pos[b] = self.block
 
+    def refill(self, ids: np.ndarray | None = None, rows: int = 1) -> None:
+        """Make sure every formation of ``ids`` (all if None) has ``rows`` unread rows.
+
+        A formation with fewer keeps its unread rows, moved to the front of its
+        block, and draws the rest of the block after them, so its sequence is
+        unchanged. Afterwards its next rows are ``buffer[b, pos[b]:]`` (the
+        compiled channel reads them there and advances ``pos`` itself).
+        """
+        if not 1 <= rows <= self.block:
+            raise ValueError(f"rows must be in [1, {self.block}] (the block size), got {rows}")
+        left = self.block - self.pos
+        short = np.flatnonzero(left < rows) if ids is None else np.asarray(ids)[left[ids] < rows]
+        for b in short:
+            keep = left[b]
+            if keep:
+                self.buffer[b, :keep] = self.buffer[b, self.pos[b] :].copy()
+            gen, fresh = self.generators[b], self.buffer[b, keep:]
+            if self.normal:
+                gen.standard_normal(out=fresh)
+            else:
+                gen.random(out=fresh)
+        self.pos[short] = 0
+
     def take(self, ids: np.ndarray) -> np.ndarray:
         """The next row of each formation in ``ids``: ``(len(ids), width)``."""
-        for b in ids[self.pos[ids] >= self.block]:
-            gen = self.generators[b]
-            shape = (self.block, self.width)
-            self.buffer[b] = gen.standard_normal(shape) if self.normal else gen.random(shape)
-            self.pos[b] = 0
+        self.refill(ids)
         rows = self.buffer[ids, self.pos[ids]]
         self.pos[ids] += 1
         return rows

@@ -33,7 +33,8 @@ as a single env's do.
 Autoreset follows Gymnasium's modes (``metadata["autoreset_mode"]``):
 ``NEXT_STEP`` (default) resets a finished formation on the following ``step``
 call, which ignores that formation's actions and returns its first
-observation with zero reward; ``SAME_STEP`` resets it within the same call and
+observation with zero reward (inside the core's step, compiled with the numba
+backend: ``FormationCore.step(restart=…)``); ``SAME_STEP`` resets it within the same call and
 puts the last observation in ``infos["final_obs"]`` (mask ``infos["_final_obs"]``).
 """
 
@@ -49,7 +50,14 @@ from gymnasium.vector.utils import batch_space
 from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
-from marine_formation_env.frontend import Rendering, formation_infos, read_reset, resolve_config, vessel_infos
+from marine_formation_env.frontend import (
+    Rendering,
+    formation_infos,
+    read_reset,
+    resolve_config,
+    vessel_infos,
+    vessel_mean,
+)
 from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_states
@@ -154,20 +162,15 @@ class MarineFormationVectorEnv(VectorEnv):
         if arr.shape != self.action_space.shape:
             raise ValueError(f"actions must have shape {self.action_space.shape}, got {arr.shape}")
         arr = arr.reshape(b, n, a)
-        pending = self._needs_reset.copy()
-        if pending.any():
-            arr = arr.copy()
-            arr[pending] = 0.0  # ignored: these formations are reset below
-        out = self.core.step(arr)
+        if self._needs_reset.any():  # NEXT_STEP: they start anew in this call (inside the compiled step)
+            pending = np.flatnonzero(self._needs_reset)
+            out = self.core.step(arr, restart=self._needs_reset.copy(), initial_state=self._initial_states(pending))
+            self._needs_reset[:] = False
+        else:
+            out = self.core.step(arr)
         obs = out.observation
         done = out.terminated | out.truncated
         infos: dict[str, Any] = {}
-        if pending.any():
-            ids = np.flatnonzero(pending)
-            obs[ids] = self._reset_formations(ids)
-            for field in (out.reward, out.terminated, out.truncated, done, *out.components.values()):
-                field[ids] = 0
-            self._needs_reset[ids] = False
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             ids = np.flatnonzero(done)
             infos["final_obs"] = self._entries_of(self._layout_obs(obs), ids)  # copies, before the reset
@@ -179,8 +182,11 @@ class MarineFormationVectorEnv(VectorEnv):
         infos.update(self._infos(out))
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
+    def _initial_states(self, ids: np.ndarray) -> np.ndarray:
+        return sample_initial_states(self.config, [self._rngs[k] for k in ids])
+
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
-        return self.core.reset(sample_initial_states(self.config, [self._rngs[k] for k in ids]), env_ids=ids)
+        return self.core.reset(self._initial_states(ids), env_ids=ids)
 
     # ---------------------------------------------------------------- layouts
     def _layout_obs(self, obs: np.ndarray) -> np.ndarray:
@@ -192,7 +198,7 @@ class MarineFormationVectorEnv(VectorEnv):
         self, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.layout == "joint":
-            return reward.mean(axis=1), terminated.copy(), truncated.copy()
+            return vessel_mean(reward), terminated.copy(), truncated.copy()
         n = self.n_vessels
         return reward.reshape(-1), np.repeat(terminated, n), np.repeat(truncated, n)
 

@@ -53,6 +53,26 @@ CASES = {
         "channel": {"burst": {"p_good_to_bad": 0.2}, "latency": 0.9, "jitter": 0.7, "tdma_slot": 1.0},
         "sensor_noise": {"position": 0.5, "heading": 0.01},
     },
+    # every feature of the channel (the compiled one against LinkChannel): Bernoulli loss per link,
+    # transmission period, range limit (100 m and 200 m apart), failures and recovery, switching graphs
+    "loss-matrix-period-range-failures": {
+        "channel": {
+            "loss": [[0.0, 0.3, 0.1], [0.5, 0.0, 0.2], [0.0, 0.9, 0.0]],
+            "period": 1.0,
+            "range": 150.0,
+            "failure_rate": 0.2,
+            "recovery_rate": 0.5,
+            "latency": 1.0,
+        },
+        "topology_schedule": [(2.0, "paper"), (1.0, "complete")],
+    },
+    "jitter-noise-current": {
+        "channel": {"loss": 0.2, "jitter": 2.5},
+        "sensor_noise": {"speed": 0.1, "yaw_rate": 0.01},
+        "current": {"speed": 0.5, "direction": 1.0, "amplitude": 0.2, "period": 60.0},
+    },
+    "acoustic-preset": {"scenario": "acoustic"},
+    "radio-preset": {"scenario": "radio", "n_vessels": 5, "topology": "ring", "safety_distance": 30.0},
 }
 
 
@@ -83,18 +103,33 @@ def test_numba_core_matches_numpy(level: str, case: str) -> None:
     overrides = dict(CASES[case])
     if level != "speed":
         overrides.pop("los_integral_gain", None)  # a speed-level option
-    cfg = make_config("paper", action_level=level, **overrides)
-    b = 5
+    cfg = make_config(overrides.pop("scenario", "paper"), action_level=level, **overrides)
+    compare_backends(cfg, b=5, steps=120, check_ends=case == "random6-episode-ends")
+
+
+def test_numba_channel_matches_numpy_with_threads_and_autoreset() -> None:
+    """Enough formations for the multi-threaded kernels, episodes that end every few steps."""
+    from marine_formation_env._numba import PARALLEL_FROM
+
+    cfg = make_config("acoustic", action_level="force", horizon=3.0, sensor_noise={"position": 1.0})
+    compare_backends(cfg, b=PARALLEL_FROM, steps=70, check_ends=True)
+
+
+def compare_backends(cfg, b: int, steps: int, check_ends: bool) -> None:
+    """Step both backends with the same random actions; formations that end start anew, on odd
+    episode ends through ``step(restart=…)`` (the vector env's autoreset), on even ones through ``reset``."""
     fast, ref = FormationCore(cfg, b, backend="numba"), FormationCore(cfg, b, backend="numpy")
     rng = np.random.default_rng(7)
     x0 = np.stack([sample_initial_state(cfg, rng) for _ in range(b)])
     for core in (fast, ref):
         core.seed_channel(list(range(b)))  # the same channel luck on both
         core.reset(x0)
-    ended = 0
-    for _ in range(120):
+    ended = events = 0
+    restart, initial = None, None
+    for _ in range(steps):
         actions = rng.uniform(-1.3, 1.3, (b, cfg.n_vessels, cfg.action_dim))  # out-of-range values are clipped
-        a, r = fast.step(actions), ref.step(actions)
+        a, r = fast.step(actions, restart, initial), ref.step(actions, restart, initial)
+        restart, initial = None, None
         assert_states_close(fast.state, ref.state)
         assert_observations_close(a.observation, r.observation, cfg.n_vessels)
         for key in r.components:
@@ -108,11 +143,15 @@ def test_numba_core_matches_numpy(level: str, case: str) -> None:
         ended += done.size
         if done.size:
             fresh = np.stack([sample_initial_state(cfg, rng) for _ in done])
-            assert_observations_close(
-                fast.reset(fresh, env_ids=done), ref.reset(fresh, env_ids=done), cfg.n_vessels
-            )
-    if case == "random6-episode-ends":
-        assert ended > 0  # the episode-end path was exercised
+            events += 1
+            if events % 2:
+                restart, initial = r.terminated | r.truncated, fresh
+            else:
+                assert_observations_close(
+                    fast.reset(fresh, env_ids=done), ref.reset(fresh, env_ids=done), cfg.n_vessels
+                )
+    if check_ends:
+        assert events > 1  # both episode-end paths were exercised
 
 
 def test_reference_paper_episode_agrees_on_both_backends() -> None:
@@ -163,10 +202,10 @@ def test_kernel_cache_follows_the_sources_it_compiles_in():
     import hashlib
     import inspect
 
-    from marine_formation_env import _numba, control, dynamics, rules
+    from marine_formation_env import _numba, channel, control, dynamics, rules
 
     digest = hashlib.sha256()
-    for module in (dynamics, control, rules):
+    for module in (dynamics, control, rules, channel):
         digest.update(inspect.getsource(module).encode())
     key = digest.hexdigest()[:16]
     assert _numba.step_kernel(1).__name__ == f"_kernel_{key}"

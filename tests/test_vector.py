@@ -225,6 +225,28 @@ def test_formations_match_parallel_envs_across_autoreset(level, mode, layout):
 
 
 @pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
+def test_channel_and_noise_streams_carry_on_across_autoreset_as_in_parallel_envs(mode):
+    """With random links and sensor noise, formation k draws from its channel streams exactly what
+    ``parallel_env`` seeded with seed + k draws over the same episodes: the autoreset of the vector
+    env (in the compiled step under NEXT_STEP) consumes nothing for the step it replaces."""
+    b_count, seed, level, horizon = 3, 4, "force", 1.0
+    channel = {
+        "burst": {"p_good_to_bad": 0.3, "p_bad_to_good": 0.4, "loss_bad": 0.9},
+        "latency": 0.2,
+        "jitter": 0.3,
+        "tdma_slot": 0.2,
+        "failure_rate": 0.5,
+        "recovery_rate": 1.0,
+    }
+    kw = {"horizon": horizon, "channel": channel, "sensor_noise": {"position": 2.0, "speed": 0.1}, **SCENARIO}
+    venv = make_vec(b_count, action_level=level, layout="joint", autoreset_mode=mode, **kw)
+    venv.reset(seed=seed)
+    manual = ManualFormations([seed + b for b in range(b_count)], mode, level, **kw)
+    ended = check_against_manual(venv, manual, "joint", b_count, level, 3 * round(horizon / DT[level]) + 2)
+    assert ended >= 2 * b_count
+
+
+@pytest.mark.parametrize("mode", MODES, ids=lambda m: m.name)
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_one_formation_ends_while_others_go_on(mode, layout):
     """Formation 1 starts with two vessels 6 m apart, head-on, and collides in the first step; 0 and 2 do not."""
