@@ -276,7 +276,7 @@ def _kernel(  # type: ignore[no-untyped-def]
             theta_j, xdot_j = theta[b, j], xdot[b, j]
             psi_w = wrap_angle(state[b, j, 2])
             own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b])
-            for f in range(OWN_SIZE if not channel_on else 0):
+            for f in range(OWN_SIZE if not (channel_on and has_noise) else 0):  # else: from the measurement
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
             for kk in range(n - 1 if not channel_on else 0):
                 i = slot_index[j, kk]
@@ -303,7 +303,7 @@ def _kernel(  # type: ignore[no-untyped-def]
                     comps[c, b, j] = 0.0
                 total += comps[c, b, j]
             reward[b, j] = total
-        if channel_on:  # the observations through the channel (theta, xdot rows of b are free now)
+        if channel_on:  # the observations through the channel (theta, xdot rows of b: along_track of the state)
             _channel_instant(
                 b,
                 state,
@@ -364,27 +364,29 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
             for i in range(n):
                 up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
                 held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
-                for d in range(depth):
-                    pend_valid[d, b, j, i] = False
+        for d in range(depth):
+            for j in range(n):
+                for i in range(n):
+                    pend_valid[b, d, j, i] = False
         if with_burst:
             r0 = uniforms[b, upos[b]]
             upos[b] += 1
             for k in range(nn):
                 bad[b, k // n, k % n] = r0[k] < p_bad
-    # ---- what each vessel measures of itself
+    # ---- what each vessel measures of itself: theta, xdot of the measured state (inertial xdot)
     if has_noise:
         row = npos[b]
         for j in range(n):
             for c in range(6):
                 measured[b, j, c] = state[b, j, c] + normals[b, row, 6 * j + c] * scale[c]
+            theta[b, j], xdot[b, j] = along_track(
+                measured[b, j, 0], offsets[j, 0], measured[b, j, 2], measured[b, j, 3], measured[b, j, 4]
+            )
         npos[b] = row + 1
-    m = measured if has_noise else state
-    vc_x = 0.0
+    # without noise the measurement is the state, whose theta, xdot the step left in these rows
     if has_current:
         vc_x = current_velocity(current[0], current[1], current[2], current[3], current[4], t)[0]
-    for j in range(n):
-        theta[b, j], xdot[b, j] = along_track(m[b, j, 0], offsets[j, 0], m[b, j, 2], m[b, j, 3], m[b, j, 4])
-        if has_current:
+        for j in range(n):
             xdot[b, j] += vc_x
     # ---- link states, transmissions, losses, delays
     g = 0
@@ -437,27 +439,35 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
                 delay_steps = math.ceil(delay / dt - 1e-9)
             if delay_steps <= max_delay_steps:  # later than the episode's end: never seen
                 slot = (step + delay_steps) % depth
-                pend_valid[slot, b, j, i] = True
-                pend_theta[slot, b, j, i] = theta[b, i]
-                pend_xdot[slot, b, j, i] = xdot[b, i]
-                pend_time[slot, b, j, i] = t
+                pend_valid[b, slot, j, i] = True
+                pend_theta[b, slot, j, i] = theta[b, i]
+                pend_xdot[b, slot, j, i] = xdot[b, i]
+                pend_time[b, slot, j, i] = t
     # ---- arrivals at this instant (zero-delay messages sent just now included)
     now = step % depth
     for j in range(n):
         for i in range(n):
-            if pend_valid[now, b, j, i]:
-                if not has_message[b, j, i] or pend_time[now, b, j, i] > held_time[b, j, i]:
-                    held_theta[b, j, i] = pend_theta[now, b, j, i]
-                    held_xdot[b, j, i] = pend_xdot[now, b, j, i]
-                    held_time[b, j, i] = pend_time[now, b, j, i]
+            if pend_valid[b, now, j, i]:
+                if not has_message[b, j, i] or pend_time[b, now, j, i] > held_time[b, j, i]:
+                    held_theta[b, j, i] = pend_theta[b, now, j, i]
+                    held_xdot[b, j, i] = pend_xdot[b, now, j, i]
+                    held_time[b, j, i] = pend_time[b, now, j, i]
                     has_message[b, j, i] = True
-                pend_valid[now, b, j, i] = False
-    # ---- observations: own measurement, and the held messages through the links up now
+                pend_valid[b, now, j, i] = False
+    # ---- observations: own measurement (without noise the step wrote it), the held messages
     for j in range(n):
-        own = (m[b, j, 1] - offsets[j, 1], wrap_angle(m[b, j, 2]), m[b, j, 3], m[b, j, 4], m[b, j, 5],
-               u_d[b], u_d_rate[b])
-        for f in range(OWN_SIZE):
-            obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
+        if has_noise:
+            own = (
+                measured[b, j, 1] - offsets[j, 1],
+                wrap_angle(measured[b, j, 2]),
+                measured[b, j, 3],
+                measured[b, j, 4],
+                measured[b, j, 5],
+                u_d[b],
+                u_d_rate[b],
+            )
+            for f in range(OWN_SIZE):
+                obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
         for kk in range(n - 1):
             i = slot_index[j, kk]
             base = OWN_SIZE + SLOT_SIZE * kk

@@ -238,8 +238,9 @@ class LinkChannel:
             [m], inertial ``ẋ_i`` [m/s], and its send time [s].
         transmitted: ``(B, N)`` which vessels transmitted at the last update.
         failed, bad: ``(B, N, N)`` the link has failed; its Gilbert–Elliott chain is bad.
-        pend_valid, pend_theta, pend_xdot, pend_time: ``(depth, B, N, N)`` the
-            messages on their way, by arrival slot ``step mod depth``.
+        pend_valid, pend_theta, pend_xdot, pend_time: ``(B, depth, N, N)`` the
+            messages on their way, by arrival slot ``step mod depth``
+            (formation-major: one formation's messages are adjacent in memory).
         graphs, ends: the schedule's adjacencies ``(G, N, N)`` and the end of
             each dwell within one cycle [s].
         tdma, every: TDMA on; control periods per slot (TDMA) or per transmission.
@@ -291,7 +292,7 @@ class LinkChannel:
         self.failed = np.zeros(shape, dtype=bool)
         self.bad = np.zeros(shape, dtype=bool)
         self.transmitted = np.zeros((b, n), dtype=bool)
-        deep = (self.depth, *shape)
+        deep = (b, self.depth, n, n)
         self.pend_valid = np.zeros(deep, dtype=bool)
         self.pend_theta = np.zeros(deep)
         self.pend_xdot = np.zeros(deep)
@@ -359,7 +360,7 @@ class LinkChannel:
             arr[ids] = False
         for arr in (self.held_theta, self.held_xdot, self.held_time):
             arr[ids] = 0.0
-        self.pend_valid[:, ids] = False
+        self.pend_valid[ids] = False
         burst = self.channel.burst
         if burst is not None:
             self.bad[ids] = self._uniforms(ids)[0] < burst.p_bad
@@ -418,14 +419,14 @@ class LinkChannel:
         sel_b, sel_j, sel_i = np.nonzero(delivered)
         if sel_b.size:
             slot = np.broadcast_to(arrival_slot, delivered.shape)[sel_b, sel_j, sel_i]
-            where = (slot, ids[sel_b], sel_j, sel_i)
+            where = (ids[sel_b], slot, sel_j, sel_i)
             self.pend_valid[where] = True
             self.pend_theta[where] = theta[sel_b, sel_i]
             self.pend_xdot[where] = xdot[sel_b, sel_i]
             self.pend_time[where] = time[sel_b]
         # arrivals at this instant (zero-delay messages sent just now included)
         k = np.mod(steps, self.depth)
-        now: tuple[Any, Any] = (int(k[0]), rows) if k.min() == k.max() else (k, ids)  # a view when in step
+        now: tuple[Any, Any] = (rows, int(k[0])) if k.min() == k.max() else (ids, k)  # a view when in step
         arrived = self.pend_valid[now]
         if arrived.any():
             has, held_time = self.has_message[rows], self.held_time[rows]

@@ -183,6 +183,8 @@ class MarineFormationVectorEnv(VectorEnv):
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
     def _initial_states(self, ids: np.ndarray) -> np.ndarray:
+        if self.config.init_noise.is_zero:  # the scenario's fixed initial state: no generator draws
+            return np.broadcast_to(self.config.initial_state, (len(ids), self.n_vessels, 6))
         return sample_initial_states(self.config, [self._rngs[k] for k in ids])
 
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
