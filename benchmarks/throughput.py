@@ -14,6 +14,8 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
   (the batched core, with autoreset) at B = 1, 64, 1024, 8192 formations vs
   VMAS ``simple_spread`` on the CPU (``n_agents=3``, continuous actions) at the
   same B: env-steps/s (formation-steps: B per call).
+* ``acoustic``, ``radio``: the same two cases with those presets' channels
+  (the observations through lossy, delayed TDMA links);
 * ``scaling``: the batched env at B = 256 for n = 3, 8, 20, 50 vessels on a
   random sparse digraph, with ideal links and the ``acoustic`` channel:
   env-steps/s, vessel-steps/s, and the exponent of the cost's growth with n;
@@ -270,6 +272,10 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
             out = _ours_parallel(min_seconds, repeats, scenario="acoustic")
         elif case == "ours_acoustic_batched":
             out = _ours_batched(b, min_seconds, repeats, scenario="acoustic")
+        elif case == "ours_radio_parallel":
+            out = _ours_parallel(min_seconds, repeats, scenario="radio")
+        elif case == "ours_radio_batched":
+            out = _ours_batched(b, min_seconds, repeats, scenario="radio")
         elif case == "mpe2_parallel":
             out = _mpe2_parallel(min_seconds, repeats)
         elif case == "ours_batched":
@@ -460,6 +466,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "ours": _subprocess_case("ours_parallel", 1, min_seconds, repeats),
             "ours_numpy": _subprocess_case("ours_numpy_parallel", 1, min_seconds, repeats),
             "ours_acoustic": _subprocess_case("ours_acoustic_parallel", 1, min_seconds, repeats),
+            "ours_radio": _subprocess_case("ours_radio_parallel", 1, min_seconds, repeats),
             "mpe2": _subprocess_case("mpe2_parallel", 1, min_seconds, repeats),
         },
         "batched": {},
@@ -469,6 +476,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "ours": _subprocess_case("ours_batched", b, min_seconds, repeats),
             "ours_numpy": _subprocess_case("ours_numpy_batched", b, min_seconds, repeats),
             "ours_acoustic": _subprocess_case("ours_acoustic_batched", b, min_seconds, repeats),
+            "ours_radio": _subprocess_case("ours_radio_batched", b, min_seconds, repeats),
             "vmas": _subprocess_case("vmas_batched", b, min_seconds, repeats),
             "jaxmarl_scan": _subprocess_case("jaxmarl_scan_batched", b, min_seconds, repeats),
             "jaxmarl_step": _subprocess_case("jaxmarl_step_batched", b, min_seconds, repeats),
@@ -480,9 +488,10 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
     report["arithmetic"] = {**ops, "elementwise_peak_ops_per_s": peak}
     for row in report["batched"].values():
         ours = row["ours"]
-        if "env_steps_per_s" in ours:
-            vessel_steps = ours["env_steps_per_s"] * 3
-            ours["fraction_of_elementwise_peak"] = vessel_steps * ops["ops_per_vessel_step"] / peak
+        for links in ("ours", "ours_acoustic", "ours_radio"):  # the channel's own work is not counted
+            if "env_steps_per_s" in row[links]:
+                vessel_steps = row[links]["env_steps_per_s"] * 3
+                row[links]["fraction_of_elementwise_peak"] = vessel_steps * ops["ops_per_vessel_step"] / peak
         if "env_steps_per_s" in ours and "env_steps_per_s" in row["vmas"]:
             row["ratio_ours_over_vmas"] = ours["env_steps_per_s"] / row["vmas"]["env_steps_per_s"]
     par = report["parallel"]
@@ -545,15 +554,19 @@ def format_report(report: dict[str, Any]) -> str:
         )
     lines += [
         "",
-        "The `acoustic` channel (TDMA, latency, bursty loss, range; observations through the channel):",
+        "The `acoustic` (TDMA, latency with jitter, bursty loss, range) and `radio` (TDMA, loss, latency, range) "
+        "channels, observations through the channel; `/ peer`: against the peer's ideal links:",
         "",
-        "| case | ideal links [steps/s] | acoustic [steps/s] | acoustic / ideal | acoustic / peer |",
-        "|---|---|---|---|---|",
+        "| case | ideal links [steps/s] | acoustic [steps/s] | acoustic / ideal | acoustic / peer "
+        "| radio [steps/s] | radio / ideal | radio / peer |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for label, ours, peer, key in cases:
+        acoustic, radio = ours["ours_acoustic"], ours.get("ours_radio", {})
         lines.append(
-            f"| {label} | {rate(ours['ours'], key)} | {rate(ours['ours_acoustic'], key)} | "
-            f"{ratio(ours['ours_acoustic'], ours['ours'], key)} | {ratio(ours['ours_acoustic'], peer, key)} |"
+            f"| {label} | {rate(ours['ours'], key)} | {rate(acoustic, key)} | "
+            f"{ratio(acoustic, ours['ours'], key)} | {ratio(acoustic, peer, key)} | {rate(radio, key)} | "
+            f"{ratio(radio, ours['ours'], key)} | {ratio(radio, peer, key)} |"
         )
     scaling = report.get("scaling")
     if scaling:
@@ -591,8 +604,13 @@ def format_report(report: dict[str, Any]) -> str:
         f"sin/cos/atan). Elementwise peak of this machine: {ar['elementwise_peak_ops_per_s'] / 1e9:.2f} Gop/s."
     )
     for b, row in report["batched"].items():
-        if "fraction_of_elementwise_peak" in row["ours"]:
-            lines.append(f"B = {b}: the batched core runs at {row['ours']['fraction_of_elementwise_peak']:.1%} of it.")
+        fractions = [
+            f"{name} {row[links]['fraction_of_elementwise_peak']:.1%}"
+            for name, links in (("ideal links", "ours"), ("acoustic", "ours_acoustic"), ("radio", "ours_radio"))
+            if "fraction_of_elementwise_peak" in row.get(links, {})
+        ]
+        if fractions:
+            lines.append(f"B = {b}: the batched core's model arithmetic runs at {', '.join(fractions)} of it.")
     return "\n".join(lines)
 
 
@@ -606,16 +624,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=5, help="timing repeats per case; the median is used")
     parser.add_argument("--quick", action="store_true", help="B = 1, 64 only, 0.5 s × 3 repeats")
     parser.add_argument("--json", type=Path, default=Path("results/throughput.json"))
+    parser.add_argument("--format", type=Path, metavar="JSON", help="only print the tables of a saved report")
     args = parser.parse_args(argv)
+    if args.format:
+        try:
+            print(format_report(json.loads(args.format.read_text())))
+        except (OSError, ValueError, KeyError) as err:
+            parser.error(f"--format {args.format}: not a readable report ({type(err).__name__}: {err})")
+        return 0
     if args.worker:
         case, b, seconds, repeats = args.worker
         print(json.dumps(run_case(case, int(b), float(seconds), int(repeats))))
         return 0
     if args.quick:
         args.batch_sizes, args.seconds, args.repeats = [1, 64], 0.5, 3
+    path = check_writable(args.json, "--json")
     report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
+    atomic_write_text(path, json.dumps(report, indent=2))  # first: the measurements outlive a formatting error
     print(format_report(report))
-    atomic_write_text(check_writable(args.json, "--json"), json.dumps(report, indent=2))
     print(f"\nwritten {args.json}")
     return 0
 
