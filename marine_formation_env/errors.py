@@ -22,6 +22,7 @@ from marine_formation_env.params import ParameterError
 
 __all__ = [
     "ConfigError",
+    "UnknownSettingError",
     "build_config",
     "check_bool",
     "check_number",
@@ -34,6 +35,16 @@ __all__ = [
 
 class ConfigError(ValueError):
     """An invalid scenario configuration (names the offending value)."""
+
+
+class UnknownSettingError(ConfigError, TypeError):
+    """A keyword that is not a scenario setting.
+
+    Also a :class:`TypeError` with Python's own wording ("got an unexpected
+    keyword argument 'x'"), which is what wrappers that probe optional
+    keywords expect when a keyword is not supported (TorchRL's ``GymEnv``
+    passes ``frameskip=`` and retries without it on exactly that error).
+    """
 
 
 def check_number(owner: str, key: str, value: Any, minimum: float | None = 0.0, strict: bool = False) -> None:

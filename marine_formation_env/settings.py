@@ -25,7 +25,7 @@ import numpy as np
 
 from marine_formation_env.channel import ChannelConfig, GilbertElliott
 from marine_formation_env.disturbances import Current, SensorNoise
-from marine_formation_env.errors import ConfigError, check_bool, check_number
+from marine_formation_env.errors import ConfigError, UnknownSettingError, check_bool, check_number
 from marine_formation_env.params import Gains
 
 __all__ = [
@@ -330,7 +330,8 @@ def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
     replaces the scenario's fixed graph by the schedule.
 
     Raises:
-        ConfigError: unknown scenario or key.
+        ConfigError: unknown scenario; :class:`~marine_formation_env.errors.UnknownSettingError`
+            (a ``ConfigError`` and a ``TypeError``) for an unknown key.
     """
     if not isinstance(scenario, str) or scenario not in SCENARIOS:
         raise ConfigError(f"unknown scenario {scenario!r}; known scenarios: {sorted(SCENARIOS)}")
@@ -338,7 +339,11 @@ def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
     valid = {f.name for f in dataclasses.fields(Settings)}
     unknown = sorted(set(overrides) - valid)
     if unknown:
-        raise ConfigError(f"unknown override(s) {unknown}; valid keys: {sorted(valid)}")
+        others = f" (and {unknown[1:]})" if len(unknown) > 1 else ""
+        raise UnknownSettingError(
+            f"scenario {scenario!r} got an unexpected keyword argument {unknown[0]!r}{others}; "
+            f"valid keys: {sorted(valid)}"
+        )
     n_default = base.get("n_vessels", 3)
     if "n_vessels" in overrides and overrides["n_vessels"] != n_default:
         if "formation" not in overrides:

@@ -412,3 +412,25 @@ def test_round_trip_of_every_preset_and_of_a_schedule():
     assert [d for d, _ in again.topology_schedule] == [1.0, 0.5]
     assert math.isinf(again.channel.range)
 
+
+
+# --------------------------------------------------------------------------- unknown keywords
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda **kw: marine_formation_env.parallel_env("paper", **kw),
+        lambda **kw: gymnasium.make(ENV_ID, **kw),
+        lambda **kw: gymnasium.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", **kw),
+        lambda **kw: make_config("acoustic", **kw),
+    ],
+    ids=["parallel_env", "gymnasium.make", "make_vec", "make_config"],
+)
+def test_unknown_keywords_raise_a_type_error_in_pythons_wording(make):
+    """Wrappers that probe optional keywords (TorchRL's GymEnv passes ``frameskip=``) match Python's own
+    ``TypeError`` message; it is also a ``ConfigError`` and still names the valid keys."""
+    with pytest.raises(TypeError, match=r"got an unexpected keyword argument 'frameskip'.*valid keys: \[.*'horizon'"):
+        make(frameskip=4)
+    with pytest.raises(ConfigError, match=r"unexpected keyword argument 'colour' \(and \['frameskip'\]\)"):
+        make(frameskip=4, colour="red")
