@@ -81,6 +81,7 @@ terminal_term = rules.terminal_term
 outside_workspace = rules.outside_workspace
 outside_envelope = rules.outside_envelope
 in_range = channel_module.in_range
+NEVER = channel_module.NEVER
 
 
 def coefficients(config: Any) -> tuple[Any, Any]:
@@ -201,7 +202,7 @@ def _kernel(  # type: ignore[no-untyped-def]
     has_noise, c_normals, c_npos, c_scale, c_measured = noise
     has_current, c_current = c_sea
     c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx = c_link
-    c_pvalid, c_ptheta, c_pxdot, c_ptime = c_pending
+    c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next = c_pending
     c_slots, c_low, c_high = c_bounds
     for b in prange(n_form):
         if restart[b]:
@@ -323,7 +324,7 @@ def _kernel(  # type: ignore[no-untyped-def]
                     c_uniforms,
                     c_upos,
                     (c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx),
-                    (c_pvalid, c_ptheta, c_pxdot, c_ptime),
+                    (c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next),
                     (c_slots, c_low, c_high),
                 ),
                 obs,
@@ -347,7 +348,7 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
     (tdma, every, with_failure, p_fail, p_recover, with_burst, p_gb, p_bg, p_bad, loss_good, loss_bad,
      latency, jitter, with_delay, max_delay_steps, depth, dt, link_range, with_range) = rule
     up, has_message, held_theta, held_xdot, held_time, failed, bad, transmitted = link
-    pend_valid, pend_theta, pend_xdot, pend_time = pending
+    pend_valid, pend_theta, pend_xdot, pend_time, next_arrival = pending
     slot_index, obs_low, obs_high = bounds
     n = state.shape[1]
     nn = n * n
@@ -368,6 +369,7 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
             for j in range(n):
                 for i in range(n):
                     pend_valid[b, d, j, i] = False
+        next_arrival[b] = NEVER
         if with_burst:
             r0 = uniforms[b, upos[b]]
             upos[b] += 1
@@ -443,17 +445,27 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
                 pend_theta[b, slot, j, i] = theta[b, i]
                 pend_xdot[b, slot, j, i] = xdot[b, i]
                 pend_time[b, slot, j, i] = t
-    # ---- arrivals at this instant (zero-delay messages sent just now included)
-    now = step % depth
-    for j in range(n):
-        for i in range(n):
-            if pend_valid[b, now, j, i]:
-                if not has_message[b, j, i] or pend_time[b, now, j, i] > held_time[b, j, i]:
-                    held_theta[b, j, i] = pend_theta[b, now, j, i]
-                    held_xdot[b, j, i] = pend_xdot[b, now, j, i]
-                    held_time[b, j, i] = pend_time[b, now, j, i]
-                    has_message[b, j, i] = True
-                pend_valid[b, now, j, i] = False
+                next_arrival[b] = min(next_arrival[b], step + delay_steps)
+    # ---- arrivals at this instant (zero-delay messages sent just now included); the ring of slots
+    # is read only at an instant where a message arrives (LinkChannel.next_arrival)
+    if step >= next_arrival[b]:
+        now = step % depth
+        for j in range(n):
+            for i in range(n):
+                if pend_valid[b, now, j, i]:
+                    if not has_message[b, j, i] or pend_time[b, now, j, i] > held_time[b, j, i]:
+                        held_theta[b, j, i] = pend_theta[b, now, j, i]
+                        held_xdot[b, j, i] = pend_xdot[b, now, j, i]
+                        held_time[b, j, i] = pend_time[b, now, j, i]
+                        has_message[b, j, i] = True
+                    pend_valid[b, now, j, i] = False
+        following = NEVER
+        for d in range(depth):
+            for j in range(n):
+                for i in range(n):
+                    if pend_valid[b, d, j, i]:
+                        following = min(following, step + (d - step) % depth)
+        next_arrival[b] = following
     # ---- observations: own measurement (without noise the step wrote it), the held messages
     for j in range(n):
         if has_noise:
@@ -719,6 +731,6 @@ def channel_args(
             channel.bad,
             channel.transmitted,
         ),
-        (channel.pend_valid, channel.pend_theta, channel.pend_xdot, channel.pend_time),
+        (channel.pend_valid, channel.pend_theta, channel.pend_xdot, channel.pend_time, channel.next_arrival),
         (slot_index, obs_low, obs_high),
     )

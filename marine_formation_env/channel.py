@@ -64,6 +64,10 @@ from marine_formation_env.streams import BlockStream, channel_streams
 __all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams", "in_range"]
 
 
+#: ``next_arrival`` of a formation with no message on its way.
+NEVER = np.iinfo(np.int64).max
+
+
 def in_range(dx: Any, dy: Any, link_range: float) -> Any:
     """Whether two vessels ``(dx, dy)`` [m] apart are within ``link_range`` [m] of each other.
 
@@ -241,6 +245,8 @@ class LinkChannel:
         pend_valid, pend_theta, pend_xdot, pend_time: ``(B, depth, N, N)`` the
             messages on their way, by arrival slot ``step mod depth``
             (formation-major: one formation's messages are adjacent in memory).
+        next_arrival: ``(B,)`` the first control period at which one of them
+            arrives (:data:`NEVER`: none on its way).
         graphs, ends: the schedule's adjacencies ``(G, N, N)`` and the end of
             each dwell within one cycle [s].
         tdma, every: TDMA on; control periods per slot (TDMA) or per transmission.
@@ -297,6 +303,7 @@ class LinkChannel:
         self.pend_theta = np.zeros(deep)
         self.pend_xdot = np.zeros(deep)
         self.pend_time = np.zeros(deep)
+        self.next_arrival = np.full(b, NEVER, dtype=np.int64)
         self.uniforms = BlockStream(b, self.draws_per_link * n * n)
 
     # ------------------------------------------------------------------ draws
@@ -361,6 +368,7 @@ class LinkChannel:
         for arr in (self.held_theta, self.held_xdot, self.held_time):
             arr[ids] = 0.0
         self.pend_valid[ids] = False
+        self.next_arrival[ids] = NEVER
         burst = self.channel.burst
         if burst is not None:
             self.bad[ids] = self._uniforms(ids)[0] < burst.p_bad
@@ -424,6 +432,8 @@ class LinkChannel:
             self.pend_theta[where] = theta[sel_b, sel_i]
             self.pend_xdot[where] = xdot[sel_b, sel_i]
             self.pend_time[where] = time[sel_b]
+            arrival = np.asarray(steps)[sel_b] + np.broadcast_to(delay_steps, delivered.shape)[sel_b, sel_j, sel_i]
+            np.minimum.at(self.next_arrival, ids[sel_b], arrival)
         # arrivals at this instant (zero-delay messages sent just now included)
         k = np.mod(steps, self.depth)
         now: tuple[Any, Any] = (rows, int(k[0])) if k.min() == k.max() else (ids, k)  # a view when in step
@@ -439,6 +449,23 @@ class LinkChannel:
                 held[rows] = np.where(newer, pend[now], held[rows])
             self.has_message[rows] = has | newer
             self.pend_valid[now] = False
+        self._advance_next_arrival(ids, np.asarray(steps))
+
+    def _advance_next_arrival(self, ids: np.ndarray, steps: np.ndarray) -> None:
+        """After the arrivals at ``steps``: the next instant at which a message of each formation arrives.
+
+        A message in slot ``s`` arrives at ``step + ((s − step) mod depth)``
+        (its delay is shorter than ``depth``); :data:`NEVER` when none is on
+        its way. The compiled channel reads only this ``(B,)`` array at
+        instants without arrivals, not the formation's ring of slots.
+        """
+        due = self.next_arrival[ids] <= steps
+        if not due.any():
+            return
+        f, k = ids[due], steps[due]
+        waiting = self.pend_valid[f].any(axis=(2, 3))  # (m, depth)
+        when = k[:, None] + np.mod(np.arange(self.depth)[None, :] - k[:, None], self.depth)
+        self.next_arrival[f] = np.where(waiting, when, NEVER).min(axis=1)
 
     def _rows(self, ids: np.ndarray) -> Any:
         """Index of formations ``ids`` (distinct, increasing): a slice (views, no copies) when it is all of them."""
