@@ -365,11 +365,12 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
             for i in range(n):
                 up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
                 held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
-        for d in range(depth):
-            for j in range(n):
-                for i in range(n):
-                    pend_valid[b, d, j, i] = False
-        next_arrival[b] = NEVER
+        if next_arrival[b] != NEVER:  # messages on their way (else the ring is clear: no read)
+            for d in range(depth):
+                for j in range(n):
+                    for i in range(n):
+                        pend_valid[b, d, j, i] = False
+            next_arrival[b] = NEVER
         if with_burst:
             r0 = uniforms[b, upos[b]]
             upos[b] += 1
