@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -13,7 +13,7 @@ from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.frontend import Rendering, one_entry, read_reset, resolve_config, vessel_infos
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode
+from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
@@ -171,12 +171,13 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     ## Arguments
 
-    ``marine_formation_env.parallel_env(scenario="paper", render_mode=None, **overrides)``
+    ``marine_formation_env.parallel_env(scenario="paper", render_mode=None, render_speedup=1.0, **overrides)``
 
     | argument           | default              | meaning                                                    |
     |--------------------|----------------------|------------------------------------------------------------|
     | `scenario`         | `"paper"`            | named defaults (`SCENARIOS`), or a ready `ScenarioConfig`  |
     | `render_mode`      | None                 | `"rgb_array"` or `"human"`                                 |
+    | `render_speedup`   | 1                    | `metadata["render_fps"]` = speedup / dt: real time at 1    |
     | `backend`          | `"auto"`             | `numpy` or `numba` (auto: numba if installed); same results |
     | `action_level`     | `"speed"`            | `force`, `guidance` or `speed`                             |
     | `dt`               | 0.1 / 0.5 / 0.5 s    | control period (force / guidance / speed)                  |
@@ -212,7 +213,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
       dwells that are not whole control periods); valid input behaves as before.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {
+    metadata: dict[str, Any] = {  # noqa: RUF012 - the class default; each env sets its own render_fps
         "name": "marine_formation_v0",
         "render_modes": ["human", "rgb_array"],
         "render_fps": 10,
@@ -223,10 +224,12 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         scenario: str | ScenarioConfig = "paper",
         render_mode: str | None = None,
         backend: str = "auto",
+        render_speedup: float = 1.0,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
         self.config: ScenarioConfig = resolve_config(scenario, overrides)
+        self.metadata = {**type(self).metadata, "render_fps": render_fps(self.config.dt, render_speedup)}
         self.render_mode = render_mode
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         n = self.config.n_vessels
@@ -332,9 +335,18 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         return self.core.global_state()[0]
 
     # ------------------------------------------------------------- rendering
-    def render(self) -> np.ndarray | None:
-        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image (even H and W).
+
+        ``mode`` is accepted and ignored (RLlib passes one): the
+        ``render_mode`` given at construction decides.
+        """
         return self._rendering.frame(self.core)
+
+    @property
+    def max_steps(self) -> int:
+        """Control periods per episode (``horizon / dt``): the step at which it is truncated."""
+        return self.config.max_steps
 
     def close(self) -> None:
         self._rendering.close()

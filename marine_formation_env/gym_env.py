@@ -43,7 +43,7 @@ from marine_formation_env.frontend import (
     vessel_mean,
 )
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode
+from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationGymEnv"]
@@ -65,10 +65,12 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         scenario: str | ScenarioConfig = "paper",
         render_mode: str | None = None,
         backend: str = "auto",
+        render_speedup: float = 1.0,
         **overrides: Any,
     ) -> None:
         check_render_mode(render_mode, self.metadata["render_modes"])
         self.config: ScenarioConfig = resolve_config(scenario, overrides)
+        self.metadata = {**type(self).metadata, "render_fps": render_fps(self.config.dt, render_speedup)}
         self.core = FormationCore(self.config, num_envs=1, backend=backend)
         self.render_mode = render_mode
         self.observation_space = observation_space(self.config, joint=True)
@@ -110,9 +112,15 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         reward = float(vessel_mean(out.reward)[0])
         return out.observation[0].reshape(-1), reward, terminated, truncated, self._info(out)
 
-    def render(self) -> np.ndarray | None:
-        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image."""
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """Draw the formation: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image (even H and W);
+        ``mode`` is accepted and ignored (the constructor's ``render_mode`` decides)."""
         return self._rendering.frame(self.core)
+
+    @property
+    def max_steps(self) -> int:
+        """Control periods per episode (``horizon / dt``): the step at which it is truncated."""
+        return self.config.max_steps
 
     def close(self) -> None:
         self._rendering.close()

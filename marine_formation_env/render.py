@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from marine_formation_env.errors import check_number
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["VESSEL_COLORS", "FormationRenderer", "hull_polygon", "require_matplotlib"]
+__all__ = ["VESSEL_COLORS", "FormationRenderer", "even_frame", "hull_polygon", "render_fps", "require_matplotlib"]
 
 VESSEL_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 
@@ -30,6 +31,27 @@ def check_render_mode(render_mode: str | None, modes: Sequence[str]) -> None:
     """Raise ValueError for a render mode outside ``modes`` (None means no rendering)."""
     if render_mode is not None and render_mode not in modes:
         raise ValueError(f"unknown render_mode {render_mode!r}; choose one of {list(modes)}")
+
+
+def render_fps(dt: float, speedup: float = 1.0) -> float:
+    """Frames per second that play an episode in real time, one frame per control period
+    ``dt`` [s], or ``speedup`` times faster (``render_speedup`` of the front ends).
+
+    Raises:
+        ConfigError: ``speedup`` is not a finite number > 0.
+    """
+    check_number("env", "render_speedup", speedup, strict=True)
+    return float(speedup) / dt
+
+
+def even_frame(image: np.ndarray) -> np.ndarray:
+    """``image`` without its last row or column where the height or width is odd.
+
+    Video encoders subsample colour in 2×2 blocks (yuv420p, the format browsers
+    play); an odd frame size makes them fall back to yuv444p.
+    """
+    height, width = image.shape[0], image.shape[1]
+    return image[: height - height % 2, : width - width % 2]
 
 
 def require_matplotlib() -> Any:
@@ -163,7 +185,7 @@ class FormationRenderer:
             return None
         self.fig.canvas.draw()
         rgba = np.asarray(self.fig.canvas.buffer_rgba())  # type: ignore[attr-defined]
-        return np.array(rgba[..., :3])
+        return np.array(even_frame(rgba)[..., :3])
 
     def _draw_scene(
         self, ax: Any, state: np.ndarray, link_arrows: bool = False, links: np.ndarray | None = None

@@ -59,7 +59,7 @@ from marine_formation_env.frontend import (
     vessel_mean,
 )
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode
+from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_states
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv"]
@@ -94,6 +94,7 @@ class MarineFormationVectorEnv(VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         render_mode: str | None = None,
         backend: str = "auto",
+        render_speedup: float = 1.0,
         **overrides: Any,
     ) -> None:
         if layout not in LAYOUTS:
@@ -108,7 +109,11 @@ class MarineFormationVectorEnv(VectorEnv):
         self.n_vessels = self.config.n_vessels
         self.layout = layout
         self.autoreset_mode = mode
-        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        self.metadata = {
+            **type(self).metadata,
+            "autoreset_mode": mode,
+            "render_fps": render_fps(self.config.dt, render_speedup),
+        }
         self.render_mode = render_mode
         b, joint = self.num_formations, layout == "joint"
         self.num_envs = b if joint else b * self.n_vessels
@@ -226,8 +231,13 @@ class MarineFormationVectorEnv(VectorEnv):
         return _flatten_entries(vessel_infos(out, self.core.time))
 
     # --------------------------------------------------------------- extras
-    def render(self) -> tuple[np.ndarray, ...] | None:
-        """Render formation 0 (``rgb_array``)."""
+    @property
+    def max_steps(self) -> int:
+        """Control periods per episode (``horizon / dt``): the step at which a formation is truncated."""
+        return self.config.max_steps
+
+    def render(self, mode: str | None = None) -> tuple[np.ndarray, ...] | None:
+        """Render formation 0 (``rgb_array``, even height and width); ``mode`` is accepted and ignored."""
         if self.render_mode is None:
             return None
         frame = self._rendering.frame(self.core, 0)

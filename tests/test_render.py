@@ -80,3 +80,40 @@ def test_links_that_are_down_are_drawn_differently():
         frames.append(_frame_ok(env.render()))
     assert not up[2, 0] and not up[0, 2] and up[1, 0] and up[2, 1]
     assert not np.array_equal(frames[0], frames[1])
+
+
+FRONTS = {
+    "parallel_env": lambda **kw: marine_formation_env.parallel_env(**kw),
+    "gymnasium.make": lambda **kw: __import__("gymnasium").make("MarineFormation-v0", **kw).unwrapped,
+    "make_vec": lambda **kw: __import__("gymnasium").make_vec(
+        "MarineFormation-v0", num_envs=2, vectorization_mode="vector_entry_point", **kw
+    ),
+}
+
+
+@pytest.mark.parametrize("front", list(FRONTS))
+@pytest.mark.parametrize(("level", "dt"), [("force", 0.1), ("speed", 0.5), ("guidance", 0.5)])
+def test_render_fps_plays_the_episode_in_real_time(front, level, dt):
+    """One frame per control period: a video of a 400 s episode lasts 400 s (``render_speedup`` shortens it)."""
+    env = FRONTS[front](action_level=level)
+    assert env.metadata["render_fps"] == pytest.approx(1.0 / dt)
+    fast = FRONTS[front](action_level=level, render_speedup=8)
+    assert fast.metadata["render_fps"] == pytest.approx(8.0 / dt)
+    assert env.max_steps == round(400.0 / dt)  # the public episode length, as wrappers read it
+    with pytest.raises(ValueError, match=r"render_speedup must be .*got 0"):
+        FRONTS[front](action_level=level, render_speedup=0)
+
+
+@pytest.mark.parametrize(
+    "workspace", [None, (-300.0, 2300.0, -501.5, 501.5), (-300.0, 2300.0, -505.5, 505.5)], ids=["paper", "a", "b"]
+)
+def test_frames_have_even_height_and_width(workspace):
+    """Video encoders need even frame sizes for yuv420p (which browsers play); the workspace sets the height."""
+    kw = {} if workspace is None else {"workspace": workspace}
+    env = marine_formation_env.parallel_env("paper", render_mode="rgb_array", **kw)
+    env.reset(seed=0)
+    frame = _frame_ok(env.render("rgb_array"))  # a mode argument is accepted (RLlib passes one)
+    assert frame.shape[0] % 2 == 0 and frame.shape[1] % 2 == 0, frame.shape
+    canvas = env._rendering._renderer.fig.canvas.get_width_height()  # (W, H) as matplotlib drew it
+    assert abs(frame.shape[0] - canvas[1]) <= 1 and frame.shape[1] == canvas[0]  # at most one row cropped
+    env.close()
