@@ -121,7 +121,8 @@ class MarineFormationVectorEnv(VectorEnv):
         self.single_action_space = action_space(self.config, joint)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._rngs = [seeding.np_random(None)[0] for _ in range(b)]
+        # one initial-state generator per formation, in an object array: autoreset picks them by index array
+        self._rngs = _generators([seeding.np_random(None)[0] for _ in range(b)])
         self._needs_reset = np.zeros(b, dtype=bool)
         self._rendering = Rendering(self.config, render_mode)
         self._started = False
@@ -144,12 +145,12 @@ class MarineFormationVectorEnv(VectorEnv):
                 the ParallelEnv (:mod:`marine_formation_env.frontend`).
         """
         request = read_reset(self.config, seed, options, self.num_formations)  # every check before anything changes
-        self._rngs = [
-            seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(request.seeds)
-        ]
+        self._rngs = _generators(
+            [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(request.seeds)]
+        )
         initial = request.initial_state
         if initial is None:
-            initial = sample_initial_states(self.config, self._rngs)
+            initial = sample_initial_states(self.config, list(self._rngs))
         self.core.seed_channel(request.channel_seeds)
         self.core.reset(initial)
         self._needs_reset[:] = False
@@ -188,9 +189,7 @@ class MarineFormationVectorEnv(VectorEnv):
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
     def _initial_states(self, ids: np.ndarray) -> np.ndarray:
-        if self.config.init_noise.is_zero:  # the scenario's fixed initial state: no generator draws
-            return np.broadcast_to(self.config.initial_state, (len(ids), self.n_vessels, 6))
-        return sample_initial_states(self.config, [self._rngs[k] for k in ids])
+        return sample_initial_states(self.config, list(self._rngs[ids]))
 
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
         return self.core.reset(self._initial_states(ids), env_ids=ids)
@@ -246,6 +245,13 @@ class MarineFormationVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         """Close the renderer's figure (if one was opened)."""
         self._rendering.close()
+
+
+def _generators(generators: list[np.random.Generator]) -> np.ndarray:
+    """The generators as a 1-d object array (``np.array`` of a list of them would try to unpack each)."""
+    out = np.empty(len(generators), dtype=object)
+    out[:] = generators
+    return out
 
 
 def _flatten_entries(infos: dict[str, Any]) -> dict[str, Any]:
