@@ -56,6 +56,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         scenario: scenario name (``**overrides`` as for ``parallel_env``), or a ready
             :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
         render_mode: ``"rgb_array"`` or ``"human"``.
+        render_speedup: ``metadata["render_fps"]`` is ``render_speedup / dt``: real time at 1.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}  # noqa: RUF012 - gymnasium API

@@ -78,6 +78,7 @@ class MarineFormationVectorEnv(VectorEnv):
         autoreset_mode: :class:`gymnasium.vector.AutoresetMode` ``NEXT_STEP``
             or ``SAME_STEP`` (or their string values).
         render_mode: ``"rgb_array"`` renders formation 0.
+        render_speedup: ``metadata["render_fps"]`` is ``render_speedup / dt``: real time at 1.
         backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see :class:`~marine_formation_env.core.FormationCore`).
     """
 
