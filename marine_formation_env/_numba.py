@@ -192,18 +192,19 @@ def _kernel(  # type: ignore[no-untyped-def]
     initial,  # (B, N, 6) initial states of the restarting formations (other rows unused)
     time1,  # (B,) time at the end of the period (0 for restarting formations)
     steps,  # (B,) control periods since reset, after this step (0 for restarting formations)
-    channel_on,  # the links are not ideal: _channel_instant writes the observations
+    channel_on,  # the links are not ideal: the channel's functions write the observations
     chan,  # the channel's constants, state and streams (ChannelArgs); placeholders with ideal links
 ):
     n_form, n = state.shape[0], state.shape[1]
     h = dt / substeps
-    # the threads cannot share tuples of arrays: unpack the channel's here, pack them again per formation
-    (noise, c_sea, c_offsets, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_link, c_pending, c_bounds) = chan
+    # the channel's arrays, unpacked once (the threads cannot share tuples of arrays)
+    (noise, c_sea, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_link, c_pending, c_bounds) = chan
     has_noise, c_normals, c_npos, c_scale, c_measured = noise
     has_current, c_current = c_sea
     c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx = c_link
     c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next = c_pending
     c_slots, c_low, c_high = c_bounds
+    c_with_burst, c_p_bad, c_depth = c_rule[5], c_rule[8], c_rule[15]
     for b in prange(n_form):
         if restart[b]:
             for j in range(n):
@@ -304,94 +305,93 @@ def _kernel(  # type: ignore[no-untyped-def]
                     comps[c, b, j] = 0.0
                 total += comps[c, b, j]
             reward[b, j] = total
-        if channel_on:  # the observations through the channel (theta, xdot rows of b: along_track of the state)
-            _channel_instant(
-                b,
-                state,
-                time1,
-                steps,
-                restart,
-                u_d,
-                u_d_rate,
-                (
-                    (has_noise, c_normals, c_npos, c_scale, c_measured),
-                    (has_current, c_current),
-                    c_offsets,
-                    c_rule,
-                    c_graphs,
-                    c_ends,
-                    c_loss,
-                    c_uniforms,
-                    c_upos,
-                    (c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx),
-                    (c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next),
-                    (c_slots, c_low, c_high),
-                ),
-                obs,
-                theta,
-                xdot,
+        if channel_on:
+            # the channel's control instant, in the numpy path's order (FormationCore._sense, and for a
+            # restarting formation LinkChannel.reset first, then update and observe), on the same rows of
+            # uniforms and normals. Its arrays go one by one to small inlined functions: packing them in
+            # a tuple per formation (the threads cannot share the outer tuple) cost about twice the
+            # channel's own arithmetic at B = 8192 (docs/throughput.md).
+            t1, step = time1[b], steps[b]
+            if restart[b]:
+                _channel_restart(
+                    b, c_depth, c_with_burst, c_p_bad, c_uniforms, c_upos, c_tx, c_up, c_has, c_failed,
+                    c_theta, c_xdot, c_time, c_pvalid, c_next, c_bad,
+                )
+            if has_noise:  # without noise the measurement is the state, whose theta, xdot the step left
+                _channel_measure(b, state, c_normals, c_npos, c_scale, c_measured, offsets, theta, xdot)
+            if has_current:  # the inertial ẋ carries the current
+                vc_x = current_velocity(c_current[0], c_current[1], c_current[2], c_current[3], c_current[4], t1)[0]
+                for j in range(n):
+                    xdot[b, j] += vc_x
+            _channel_send(
+                b, state, t1, step, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_up, c_failed, c_bad,
+                c_tx, c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next, theta, xdot,
+            )
+            if step >= c_next[b]:  # the ring of pending messages is read only at an instant where one arrives
+                _channel_deliver(b, step, c_depth, c_has, c_theta, c_xdot, c_time, c_pvalid, c_ptheta, c_pxdot,
+                                 c_ptime, c_next)
+            _channel_observe(
+                b, t1, has_noise, c_measured, offsets, u_d, u_d_rate, c_up, c_has, c_theta, c_xdot, c_time,
+                theta, xdot, c_slots, c_low, c_high, obs,
             )
 
 
 @njit(inline="always")
-def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, theta, xdot):  # type: ignore[no-untyped-def]
-    """One control instant of the channel for formation ``b``, right after its step (non-ideal links).
+def _channel_restart(  # type: ignore[no-untyped-def]
+    b, depth, with_burst, p_bad, uniforms, upos, transmitted, up, has_message, failed,
+    held_theta, held_xdot, held_time, pend_valid, next_arrival, bad,
+):
+    """``LinkChannel.reset`` for formation ``b``: no messages, every link live, Gilbert–Elliott chains stationary."""
+    n = up.shape[1]
+    for j in range(n):
+        transmitted[b, j] = False
+        for i in range(n):
+            up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
+            held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
+    if next_arrival[b] != NEVER:  # messages on their way (else the ring is clear: no read)
+        for d in range(depth):
+            for j in range(n):
+                for i in range(n):
+                    pend_valid[b, d, j, i] = False
+        next_arrival[b] = NEVER
+    if with_burst:
+        r0 = uniforms[b, upos[b]]
+        upos[b] += 1
+        for k in range(n * n):
+            bad[b, k // n, k % n] = r0[k] < p_bad
 
-    The numpy path's ``FormationCore._sense`` (and, for a restarting formation,
-    :meth:`~marine_formation_env.channel.LinkChannel.reset` first),
-    :meth:`~marine_formation_env.channel.LinkChannel.update` and ``observe``,
-    in the same order and reading the same rows of uniforms and normals.
+
+@njit(inline="always")
+def _channel_measure(b, state, normals, npos, scale, measured, offsets, theta, xdot):  # type: ignore[no-untyped-def]
+    """What each vessel of ``b`` measures of itself (``SensorNoiseSource``): the state plus a row of normals.
+
+    Leaves θ and ẋ (body-frame ẋ, before the current) of the measured state in ``theta``, ``xdot``.
     """
-    (noise, sea, offsets, rule, graphs, ends, loss, uniforms, upos, link, pending, bounds) = chan
-    has_noise, normals, npos, scale, measured = noise
-    has_current, current = sea
-    (tdma, every, with_failure, p_fail, p_recover, with_burst, p_gb, p_bg, p_bad, loss_good, loss_bad,
+    row = npos[b]
+    for j in range(state.shape[1]):
+        for c in range(6):
+            measured[b, j, c] = state[b, j, c] + normals[b, row, 6 * j + c] * scale[c]
+        theta[b, j], xdot[b, j] = along_track(
+            measured[b, j, 0], offsets[j, 0], measured[b, j, 2], measured[b, j, 3], measured[b, j, 4]
+        )
+    npos[b] = row + 1
+
+
+@njit(inline="always")
+def _channel_send(  # type: ignore[no-untyped-def]
+    b, state, t, step, rule, graphs, ends, loss, uniforms, upos, up, failed, bad,
+    transmitted, pend_valid, pend_theta, pend_xdot, pend_time, next_arrival, theta, xdot,
+):
+    """``LinkChannel.update`` for formation ``b``: link states, transmissions, losses, delays into the ring."""
+    (tdma, every, with_failure, p_fail, p_recover, with_burst, p_gb, p_bg, _p_bad, loss_good, loss_bad,
      latency, jitter, with_delay, max_delay_steps, depth, dt, link_range, with_range) = rule
-    up, has_message, held_theta, held_xdot, held_time, failed, bad, transmitted = link
-    pend_valid, pend_theta, pend_xdot, pend_time, next_arrival = pending
-    slot_index, obs_low, obs_high = bounds
-    n = state.shape[1]
+    n = up.shape[1]
     nn = n * n
     # which part of a row of uniforms holds which draw: failure, Gilbert-Elliott, loss, jitter
     d_fail = 0
     d_burst = d_fail + (1 if with_failure else 0)
     d_loss = d_burst + (1 if with_burst else 0)
     d_jitter = d_loss + 1
-    t = time1[b]
-    step = steps[b]
-    if restart[b]:  # LinkChannel.reset: no messages, every link live, chains stationary
-        for j in range(n):
-            transmitted[b, j] = False
-            for i in range(n):
-                up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
-                held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
-        if next_arrival[b] != NEVER:  # messages on their way (else the ring is clear: no read)
-            for d in range(depth):
-                for j in range(n):
-                    for i in range(n):
-                        pend_valid[b, d, j, i] = False
-            next_arrival[b] = NEVER
-        if with_burst:
-            r0 = uniforms[b, upos[b]]
-            upos[b] += 1
-            for k in range(nn):
-                bad[b, k // n, k % n] = r0[k] < p_bad
-    # ---- what each vessel measures of itself: theta, xdot of the measured state (inertial xdot)
-    if has_noise:
-        row = npos[b]
-        for j in range(n):
-            for c in range(6):
-                measured[b, j, c] = state[b, j, c] + normals[b, row, 6 * j + c] * scale[c]
-            theta[b, j], xdot[b, j] = along_track(
-                measured[b, j, 0], offsets[j, 0], measured[b, j, 2], measured[b, j, 3], measured[b, j, 4]
-            )
-        npos[b] = row + 1
-    # without noise the measurement is the state, whose theta, xdot the step left in these rows
-    if has_current:
-        vc_x = current_velocity(current[0], current[1], current[2], current[3], current[4], t)[0]
-        for j in range(n):
-            xdot[b, j] += vc_x
-    # ---- link states, transmissions, losses, delays
     g = 0
     if graphs.shape[0] > 1:
         phase = (t + 1e-9) % ends[-1]
@@ -447,27 +447,44 @@ def _channel_instant(b, state, time1, steps, restart, u_d, u_d_rate, chan, obs, 
                 pend_xdot[b, slot, j, i] = xdot[b, i]
                 pend_time[b, slot, j, i] = t
                 next_arrival[b] = min(next_arrival[b], step + delay_steps)
-    # ---- arrivals at this instant (zero-delay messages sent just now included); the ring of slots
-    # is read only at an instant where a message arrives (LinkChannel.next_arrival)
-    if step >= next_arrival[b]:
-        now = step % depth
+
+
+@njit(inline="always")
+def _channel_deliver(  # type: ignore[no-untyped-def]
+    b, step, depth, has_message, held_theta, held_xdot, held_time, pend_valid, pend_theta, pend_xdot, pend_time,
+    next_arrival,
+):
+    """The messages of ``b`` that arrive at ``step`` (zero-delay ones sent just now included): newest kept."""
+    n = has_message.shape[1]
+    now = step % depth
+    for j in range(n):
+        for i in range(n):
+            if pend_valid[b, now, j, i]:
+                if not has_message[b, j, i] or pend_time[b, now, j, i] > held_time[b, j, i]:
+                    held_theta[b, j, i] = pend_theta[b, now, j, i]
+                    held_xdot[b, j, i] = pend_xdot[b, now, j, i]
+                    held_time[b, j, i] = pend_time[b, now, j, i]
+                    has_message[b, j, i] = True
+                pend_valid[b, now, j, i] = False
+    following = NEVER
+    for d in range(depth):
         for j in range(n):
             for i in range(n):
-                if pend_valid[b, now, j, i]:
-                    if not has_message[b, j, i] or pend_time[b, now, j, i] > held_time[b, j, i]:
-                        held_theta[b, j, i] = pend_theta[b, now, j, i]
-                        held_xdot[b, j, i] = pend_xdot[b, now, j, i]
-                        held_time[b, j, i] = pend_time[b, now, j, i]
-                        has_message[b, j, i] = True
-                    pend_valid[b, now, j, i] = False
-        following = NEVER
-        for d in range(depth):
-            for j in range(n):
-                for i in range(n):
-                    if pend_valid[b, d, j, i]:
-                        following = min(following, step + (d - step) % depth)
-        next_arrival[b] = following
-    # ---- observations: own measurement (without noise the step wrote it), the held messages
+                if pend_valid[b, d, j, i]:
+                    following = min(following, step + (d - step) % depth)
+    next_arrival[b] = following
+
+
+@njit(inline="always")
+def _channel_observe(  # type: ignore[no-untyped-def]
+    b, t, has_noise, measured, offsets, u_d, u_d_rate, up, has_message, held_theta, held_xdot, held_time,
+    theta, xdot, slot_index, obs_low, obs_high, obs,
+):
+    """The observations of ``b`` through the channel (``LinkChannel.slots``): own measurement, held messages.
+
+    Without sensor noise the step already wrote the own part (the measurement is the state).
+    """
+    n = up.shape[1]
     for j in range(n):
         if has_noise:
             own = (
@@ -715,7 +732,6 @@ def channel_args(
     return (
         noise,
         (not config.current.is_zero, np.array(config.current.coefficients, dtype=float)),
-        np.ascontiguousarray(config.formation),
         rule,
         np.ascontiguousarray(channel.graphs),
         np.asarray(channel.ends, dtype=float),
