@@ -38,18 +38,20 @@ own ``parallel_api_test`` passes an unknown option and expects it accepted).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from gymnasium.utils import seeding
 
 from marine_formation_env.core import COLUMNS_HINT, FormationCore, StepOutput
 from marine_formation_env.errors import check_seed, checked_array
-from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config
+from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config, sample_initial_states
 
 __all__ = [
     "RESET_OPTIONS",
+    "InitialStates",
     "Rendering",
     "ResetRequest",
     "check_initial_state",
@@ -188,6 +190,41 @@ def read_reset(
     if initial is not None:
         initial = check_initial_state(config, initial, num_formations)
     return ResetRequest(seeds, channel, initial)
+
+
+class InitialStates:
+    """One initial-state generator per formation, for the batched front ends (vector env, TorchRL env).
+
+    Formation ``b`` reset with seed ``s`` gets ``np.random.default_rng(s)``
+    (through ``gymnasium.utils.seeding``), the generator a single
+    ``parallel_env`` reset with ``s`` uses, so its draws replay that env's;
+    unseeded resets and restarts carry on with the formation's generator, as a
+    single env's later ``reset()`` calls do.
+    """
+
+    def __init__(self, config: ScenarioConfig, num_formations: int) -> None:
+        self.config = config
+        # in an object array: restarts pick them by index array
+        self._rngs = _generators([seeding.np_random(None)[0] for _ in range(num_formations)])
+
+    def seed(self, seeds: Sequence[int | None], ids: np.ndarray | None = None) -> None:
+        """Reseed formations ``ids`` (all if None) with ``seeds`` (None keeps that formation's generator)."""
+        index = np.arange(len(self._rngs)) if ids is None else np.asarray(ids)
+        for b, s in zip(index, seeds, strict=True):
+            if s is not None:
+                self._rngs[b] = seeding.np_random(s)[0]
+
+    def draw(self, ids: np.ndarray | None = None) -> np.ndarray:
+        """``(len(ids), N, 6)`` initial states of formations ``ids`` (all if None), one draw each."""
+        rngs = self._rngs if ids is None else self._rngs[np.asarray(ids)]
+        return sample_initial_states(self.config, list(rngs))
+
+
+def _generators(generators: list[np.random.Generator]) -> np.ndarray:
+    """The generators as a 1-d object array (``np.array`` of a list of them would try to unpack each)."""
+    out = np.empty(len(generators), dtype=object)
+    out[:] = generators
+    return out
 
 
 # ---------------------------------------------------------------------------- infos

@@ -43,7 +43,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
@@ -51,6 +50,7 @@ from marine_formation_env.actions import action_space
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import (
+    InitialStates,
     Rendering,
     formation_infos,
     read_reset,
@@ -60,7 +60,7 @@ from marine_formation_env.frontend import (
 )
 from marine_formation_env.observations import observation_space
 from marine_formation_env.render import check_render_mode, render_fps
-from marine_formation_env.scenarios import ScenarioConfig, sample_initial_states
+from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv"]
 
@@ -122,8 +122,7 @@ class MarineFormationVectorEnv(VectorEnv):
         self.single_action_space = action_space(self.config, joint)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        # one initial-state generator per formation, in an object array: autoreset picks them by index array
-        self._rngs = _generators([seeding.np_random(None)[0] for _ in range(b)])
+        self._initial = InitialStates(self.config, b)
         self._needs_reset = np.zeros(b, dtype=bool)
         self._rendering = Rendering(self.config, render_mode)
         self._started = False
@@ -146,12 +145,10 @@ class MarineFormationVectorEnv(VectorEnv):
                 the ParallelEnv (:mod:`marine_formation_env.frontend`).
         """
         request = read_reset(self.config, seed, options, self.num_formations)  # every check before anything changes
-        self._rngs = _generators(
-            [seeding.np_random(s)[0] if s is not None else self._rngs[k] for k, s in enumerate(request.seeds)]
-        )
+        self._initial.seed(request.seeds)
         initial = request.initial_state
         if initial is None:
-            initial = sample_initial_states(self.config, list(self._rngs))
+            initial = self._initial.draw()
         self.core.seed_channel(request.channel_seeds)
         self.core.reset(initial)
         self._needs_reset[:] = False
@@ -171,7 +168,7 @@ class MarineFormationVectorEnv(VectorEnv):
         arr = arr.reshape(b, n, a)
         if self._needs_reset.any():  # NEXT_STEP: they start anew in this call (inside the compiled step)
             pending = np.flatnonzero(self._needs_reset)
-            out = self.core.step(arr, restart=self._needs_reset.copy(), initial_state=self._initial_states(pending))
+            out = self.core.step(arr, restart=self._needs_reset.copy(), initial_state=self._initial.draw(pending))
             self._needs_reset[:] = False
         else:
             out = self.core.step(arr)
@@ -189,11 +186,8 @@ class MarineFormationVectorEnv(VectorEnv):
         infos.update(self._infos(out))
         return self._layout_obs(obs), reward, terminated, truncated, infos
 
-    def _initial_states(self, ids: np.ndarray) -> np.ndarray:
-        return sample_initial_states(self.config, list(self._rngs[ids]))
-
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
-        return self.core.reset(self._initial_states(ids), env_ids=ids)
+        return self.core.reset(self._initial.draw(ids), env_ids=ids)
 
     # ---------------------------------------------------------------- layouts
     def _layout_obs(self, obs: np.ndarray) -> np.ndarray:
@@ -246,13 +240,6 @@ class MarineFormationVectorEnv(VectorEnv):
     def close_extras(self, **kwargs: Any) -> None:
         """Close the renderer's figure (if one was opened)."""
         self._rendering.close()
-
-
-def _generators(generators: list[np.random.Generator]) -> np.ndarray:
-    """The generators as a 1-d object array (``np.array`` of a list of them would try to unpack each)."""
-    out = np.empty(len(generators), dtype=object)
-    out[:] = generators
-    return out
 
 
 def _flatten_entries(infos: dict[str, Any]) -> dict[str, Any]:
