@@ -31,6 +31,7 @@ import numpy as np
 
 from baselines.metrics import episode_metrics
 from baselines.rollout import Trajectory
+from marine_formation_env.frontend import reward_terms
 from marine_formation_env.scenarios import ScenarioConfig
 from marine_formation_env.vector import MarineFormationVectorEnv
 
@@ -124,7 +125,7 @@ def _rollout(
         obs, rew, term, trunc, infos = venv.step(act)
         actions[k] = np.clip(act, -1.0, 1.0).reshape(b, n, a_dim)
         rewards[k] = rew.reshape(b, n)
-        for name, value in infos["reward_components"].items():
+        for name, value in reward_terms(infos).items():
             components.setdefault(name, np.zeros((steps, b, n)))[k] = value.reshape(b, n)
         if "commanded_speed" in infos:
             u_c[k] = infos["commanded_speed"].reshape(b, n)

@@ -111,11 +111,11 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
     if loaded is not None and spec in loaded:
         policy = loaded[spec]
         obs_dim = env.observation_space(env.possible_agents[0]).shape[0]
-        expected = policy.model.observation_space.shape[0]
-        if expected != obs_dim or policy.model.action_space.shape[0] != env.config.action_dim:
+        expected, actions = policy.observation_dim, policy.action_dim
+        if expected != obs_dim or actions != env.config.action_dim:
             raise ValueError(
                 f"model {spec!r} expects observations of size {expected} and actions of size "
-                f"{policy.model.action_space.shape[0]}, but this scenario has {obs_dim} and "
+                f"{actions}, but this scenario has {obs_dim} and "
                 f"{env.config.action_dim} (action_level {env.config.action_level!r}, n_vessels "
                 f"{env.config.n_vessels}); evaluate it on the scenario it was trained on"
             )

@@ -136,9 +136,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     are ``reward=RewardConfig(...)`` fields. If the
     formation terminates early, every vessel also receives
     ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
-    so ending an episode never pays. ``infos[agent]["reward_components"]``
-    holds every term (``cross_track, heading, coordination, speed, effort,
-    terminal``); they sum to the reward. A return near 0 is perfect.
+    so ending an episode never pays. ``infos[agent]`` holds every term as
+    ``reward_cross_track``, ``reward_heading``, ``reward_coordination``,
+    ``reward_speed``, ``reward_effort``, ``reward_terminal``; they sum to the
+    reward. A return near 0 is perfect.
 
     ## Starting State
 

@@ -5,16 +5,21 @@ The PettingZoo env, the gymnasium view and the vector env accept the same
 message, report their infos in one schema, and render through one piece of
 code. This module holds those rules once; the front ends only lay them out.
 
-Infos (the same keys from ``reset()``, with zeros, as from ``step()``):
+Infos (the same keys from ``reset()``, with zeros, as from ``step()``). They
+are flat, one number (or array) per key, because wrappers such as TorchRL's
+``PettingZooWrapper`` turn every info entry into a tensor; the reward terms
+are ``reward_<term>`` (:data:`REWARD_INFO_KEYS`, read back by name with
+:func:`reward_terms`):
 
 * **per vessel** (ParallelEnv ``infos[agent]``, vector env ``layout="agent"``
-  entries): ``reward_components`` (name → that vessel's term; they sum to its
-  reward), ``time`` [s], ``collision``, ``out_of_bounds`` (the formation's
-  flags), and ``commanded_speed`` u_c [m/s] at the ``speed`` and ``guidance``
-  levels.
+  entries): ``reward_cross_track``, ``reward_heading``, ``reward_coordination``,
+  ``reward_speed``, ``reward_effort``, ``reward_terminal`` (that vessel's
+  terms; they sum to its reward), ``time`` [s], ``collision``,
+  ``out_of_bounds`` (the formation's flags), and ``commanded_speed`` u_c [m/s]
+  at the ``speed`` and ``guidance`` levels.
 * **per formation** (``gymnasium.make`` info, vector env ``layout="joint"``
-  entries): ``vessel_rewards`` ``(N,)``, ``reward_components`` (name → the mean
-  over the vessels; they sum to the formation's reward, the mean of the
+  entries): ``vessel_rewards`` ``(N,)``, the ``reward_<term>`` entries (the
+  mean over the vessels; they sum to the formation's reward, the mean of the
   vessels'), ``time``, ``collision``, ``out_of_bounds``, and
   ``commanded_speed`` ``(N,)``.
 
@@ -45,12 +50,13 @@ from typing import Any
 import numpy as np
 from gymnasium.utils import seeding
 
-from marine_formation_env.core import COLUMNS_HINT, FormationCore, StepOutput
+from marine_formation_env.core import COLUMNS_HINT, REWARD_COMPONENTS, FormationCore, StepOutput
 from marine_formation_env.errors import check_seed, checked_array
 from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config, sample_initial_states
 
 __all__ = [
     "RESET_OPTIONS",
+    "REWARD_INFO_KEYS",
     "InitialStates",
     "Rendering",
     "ResetRequest",
@@ -61,9 +67,13 @@ __all__ = [
     "one_entry",
     "read_reset",
     "resolve_config",
+    "reward_terms",
     "vessel_infos",
     "vessel_mean",
 ]
+
+#: The info keys of the reward terms, in the order of ``REWARD_COMPONENTS``: ``reward_cross_track``, ...
+REWARD_INFO_KEYS = tuple(f"reward_{name}" for name in REWARD_COMPONENTS)
 
 #: The keys ``reset(options=…)`` understands.
 RESET_OPTIONS = ("initial_state", "channel_seed")
@@ -251,7 +261,7 @@ def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     n = out.reward.shape[1]
     flags = {"collision": out.collision, "out_of_bounds": out.out_of_bounds}
     infos: dict[str, Any] = {
-        "reward_components": {key: np.array(value, dtype=np.float64) for key, value in out.components.items()},
+        **{f"reward_{key}": np.array(value, dtype=np.float64) for key, value in out.components.items()},
         "time": np.repeat(np.asarray(time, dtype=np.float64)[:, None], n, axis=1),
         **{key: np.repeat(np.asarray(value, dtype=bool)[:, None], n, axis=1) for key, value in flags.items()},
     }
@@ -264,7 +274,7 @@ def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     """The per-formation info schema (module docstring) as arrays with a leading ``(B,)`` axis."""
     infos: dict[str, Any] = {
         "vessel_rewards": np.array(out.reward, dtype=np.float64),
-        "reward_components": {key: vessel_mean(value) for key, value in out.components.items()},
+        **{f"reward_{key}": vessel_mean(value) for key, value in out.components.items()},
         "time": np.array(time, dtype=np.float64),
         "collision": np.array(out.collision, dtype=bool),
         "out_of_bounds": np.array(out.out_of_bounds, dtype=bool),
@@ -272,6 +282,11 @@ def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     if out.commanded_speed is not None:
         infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
     return infos
+
+
+def reward_terms(infos: Mapping[str, Any]) -> dict[str, Any]:
+    """The reward terms of an info (any schema above) by their names: ``{"cross_track": …, …}``."""
+    return {name: infos[key] for name, key in zip(REWARD_COMPONENTS, REWARD_INFO_KEYS, strict=True)}
 
 
 def one_entry(infos: dict[str, Any], index: tuple[int, ...]) -> dict[str, Any]:

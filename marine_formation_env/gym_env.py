@@ -12,7 +12,7 @@ with everything joined:
 * action ``Box(-1, 1, (N·A,), float32)``: vessel ``j``'s action in
   ``[j·A, (j+1)·A)``, same maps as the ParallelEnv;
 * reward: the mean of the vessels' rewards (the shared team reward);
-  ``info["vessel_rewards"]`` holds them all, ``info["reward_components"]``
+  ``info["vessel_rewards"]`` holds them all, ``info["reward_<term>"]``
   the vessel-averaged terms (they sum to the reward); ``time``,
   ``collision``, ``out_of_bounds`` and (``speed``, ``guidance``) the
   ``commanded_speed`` of each vessel complete the per-formation info schema of

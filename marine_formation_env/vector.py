@@ -13,8 +13,8 @@ Two layouts of the same simulation:
   ``gymnasium.make("MarineFormation-v0")`` view: observation ``(N·dim,)`` (the
   vessels' masked observations concatenated), action ``(N·A,)``, reward the mean
   of the vessels' rewards. ``num_envs = B``. Infos are the gym view's, stacked:
-  ``infos["vessel_rewards"]`` ``(B, N)``, ``infos["reward_components"]`` maps
-  each term to its ``(B,)`` vessel mean.
+  ``infos["vessel_rewards"]`` ``(B, N)``, ``infos["reward_<term>"]`` each
+  term's ``(B,)`` vessel mean.
 * ``layout="agent"``: one entry per vessel (parameter sharing), entry
   ``b·N + j`` is vessel ``j`` of formation ``b``; observation ``(dim,)``,
   action ``(A,)``, reward that vessel's own. ``num_envs = B·N``; a formation's

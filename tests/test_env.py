@@ -17,6 +17,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import marine_formation_env
 from marine_formation_env import RewardConfig, SpeedProfile
+from marine_formation_env.frontend import reward_terms
 
 LEVELS = ("force", "guidance", "speed")
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
@@ -280,7 +281,7 @@ def test_collision_terminates_all_with_terminal_penalty(reward):
     for agent in env.possible_agents:
         assert infos[agent]["collision"] is True
         assert infos[agent]["out_of_bounds"] is False
-        comp = infos[agent]["reward_components"]
+        comp = reward_terms(infos[agent])
         assert comp["terminal"] == pytest.approx(-total_weight * time_left, rel=1e-12)
         assert rewards[agent] == pytest.approx(sum(comp.values()), rel=1e-12, abs=1e-12)
     with pytest.raises(RuntimeError):
@@ -309,10 +310,10 @@ def test_leaving_workspace_terminates():
     for agent in env.possible_agents:
         assert infos[agent]["out_of_bounds"] is True
         assert infos[agent]["collision"] is False
-        assert infos[agent]["reward_components"]["terminal"] == pytest.approx(
+        assert reward_terms(infos[agent])["terminal"] == pytest.approx(
             -DEFAULT_TOTAL_WEIGHT * (30.0 - 0.1), rel=1e-9
         )
-        assert rewards[agent] == pytest.approx(sum(infos[agent]["reward_components"].values()), rel=1e-12)
+        assert rewards[agent] == pytest.approx(sum(reward_terms(infos[agent]).values()), rel=1e-12)
 
 
 @pytest.mark.parametrize("level", LEVELS)
@@ -325,7 +326,7 @@ def test_reward_components_sum_to_reward(level):
         actions = {a: rng.uniform(-1, 1, ACTION_DIM[level]).astype(np.float32) for a in env.agents}
         _, rewards, _, _, infos = env.step(actions)
         for agent, r in rewards.items():
-            comp = infos[agent]["reward_components"]
+            comp = reward_terms(infos[agent])
             assert set(comp) == names
             assert r == pytest.approx(sum(comp.values()), rel=1e-12, abs=1e-12)
             assert r < 0.0  # every cost is ≥ 0 and effort > 0 with random actions

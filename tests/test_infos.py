@@ -14,6 +14,7 @@ import pytest
 import marine_formation_env
 from marine_formation_env import ENV_ID
 from marine_formation_env.core import REWARD_COMPONENTS
+from marine_formation_env.frontend import reward_terms
 from marine_formation_env.vector import MarineFormationVectorEnv
 
 LEVELS = ["force", "guidance", "speed"]
@@ -43,7 +44,7 @@ def test_parallel_env_reset_infos_have_the_step_keys(level):
     _, _, _, _, step_infos = env.step({a: env.action_space(a).sample() for a in env.agents})
     for agent in env.possible_agents:
         assert key_tree(reset_infos[agent]) == key_tree(step_infos[agent])
-        assert set(reset_infos[agent]["reward_components"]) == set(REWARD_COMPONENTS)
+        assert set(reward_terms(reset_infos[agent])) == set(REWARD_COMPONENTS)
         assert_zero(reset_infos[agent])
         assert reset_infos[agent]["time"] == 0.0
         assert ("commanded_speed" in reset_infos[agent]) == (level != "force")
@@ -103,8 +104,8 @@ def test_every_view_reports_the_same_infos_for_the_same_seed(level):
         for key, value in gym_items.items():
             np.testing.assert_array_equal(joint_items[key][0], value, err_msg=key)
         for name in REWARD_COMPONENTS:
-            per_vessel = [par_infos[a]["reward_components"][name] for a in agents]
-            assert gym_info["reward_components"][name] == pytest.approx(np.mean(per_vessel), rel=1e-12, abs=1e-15)
+            per_vessel = [par_infos[a][f"reward_{name}"] for a in agents]
+            assert gym_info[f"reward_{name}"] == pytest.approx(np.mean(per_vessel), rel=1e-12, abs=1e-15)
         if level != "force":
             commanded = [par_infos[a]["commanded_speed"] for a in agents]
             np.testing.assert_array_equal(gym_info["commanded_speed"], commanded)

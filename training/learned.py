@@ -38,6 +38,8 @@ class ModelPolicy(BatchPolicy):
         self.model = model
         self.normalizer = normalizer
         self.deterministic = deterministic
+        self.observation_dim: int = model.observation_space.shape[0]
+        self.action_dim: int = model.action_space.shape[0]
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(..., A)`` for observations ``(..., dim)``."""
@@ -54,18 +56,27 @@ def run_folder_of(path: str | Path) -> Path:
     return path if path.is_dir() else path.parent
 
 
-def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[ModelPolicy, dict[str, Any]]:
+def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[Any, dict[str, Any]]:
     """Load a trained policy and the resolved config of its run.
 
     Args:
         path: ``runs/NAME/model.zip`` (or any checkpoint ``.zip`` in a run
-            folder) or the run folder itself.
+            folder) or the run folder itself; a run folder of
+            ``training.torchrl_ppo`` (``policy.pt``) gives a
+            :class:`~training.torchrl_ppo.TorchPolicy`.
 
     Returns:
         ``(policy, config)`` where ``config`` is the run's resolved training
         config (``scenario`` and ``env_kwargs`` say what it was trained on).
     """
     path = Path(path)
+    if path.is_dir() and (path / "policy.pt").is_file():  # a run of training.torchrl_ppo
+        from training.torchrl_ppo import load_torch_policy
+
+        try:
+            return load_torch_policy(path)
+        except ValueError as err:
+            raise UnreadableRunError(str(err)) from None
     model_path = path / "model.zip" if path.is_dir() else path
     folder = run_folder_of(path)
     if not model_path.is_file():

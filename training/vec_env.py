@@ -23,6 +23,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
+from marine_formation_env.frontend import REWARD_INFO_KEYS
 from marine_formation_env.vector import MarineFormationVectorEnv
 
 __all__ = ["SharedPolicyVecEnv"]
@@ -70,10 +71,10 @@ class SharedPolicyVecEnv(VecEnv):
         self._actions = None
         dones = terminated | truncated
         final = infos.get("final_obs")
-        components = infos["reward_components"]
+        components = {key: infos[key] for key in REWARD_INFO_KEYS}
         entry_infos: list[dict[str, Any]] = []
         for k in range(self.num_envs):
-            info: dict[str, Any] = {"reward_components": {name: float(v[k]) for name, v in components.items()}}
+            info: dict[str, Any] = {key: float(v[k]) for key, v in components.items()}
             if dones[k]:
                 info["terminal_observation"] = final[k] if final is not None else obs[k]
                 info["TimeLimit.truncated"] = bool(truncated[k] and not terminated[k])
