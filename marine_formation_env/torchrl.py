@@ -54,6 +54,7 @@ front end shares).
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -146,7 +147,7 @@ class MarineFormationTorchEnv(EnvBase):
         self._pending_seed: int | None = None
         self._obs = np.zeros((self.num_envs, self.n_agents, self.core.layout.dim), dtype=np.float32)
         self._has_speed = self.config.action_level != "force"
-        self._rendering = Rendering(self.config, render_mode)
+        self._rendering = Rendering(self.config, "rgb_array")  # drawn only when a frame is asked for
         self.group = group
         self._make_specs()
         if seed is not None:
@@ -288,11 +289,20 @@ class MarineFormationTorchEnv(EnvBase):
 
     # ------------------------------------------------------------------ extras
     def render(self, mode: str | None = None, **ignored: Any) -> np.ndarray | None:
-        """Formation 0 as an ``(H, W, 3)`` uint8 frame (``render_mode="rgb_array"``).
+        """Formation 0 as an ``(H, W, 3)`` uint8 frame (even height and width).
 
-        ``mode`` and other renderers' keywords (VMAS's ``agent_index_focus``,
-        which TorchRL's VMAS recipes pass) are accepted and ignored.
+        A frame is drawn when the env was made with ``render_mode="rgb_array"``
+        or when ``mode="rgb_array"`` is asked for in the call (as ``VmasEnv``
+        allows: TorchRL's VMAS recipes record their evaluation videos that
+        way); otherwise a warning, as gymnasium's envs give, and None. Other
+        renderers' keywords (VMAS's ``agent_index_focus``) are accepted and ignored.
         """
+        if self.render_mode is None and mode != "rgb_array":
+            warnings.warn(
+                "render() called without a render_mode; pass render_mode='rgb_array' or render(mode='rgb_array')",
+                stacklevel=2,
+            )
+            return None
         return self._rendering.frame(self.core, 0)
 
     def close(self, *, raise_if_closed: bool = True) -> None:

@@ -147,3 +147,22 @@ def test_render_returns_an_even_sized_frame():
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[0] % 2 == 0 and frame.shape[1] % 2 == 0
     env.close()
+    plain = MarineFormationTorchEnv(num_envs=1)
+    plain.reset()
+    with pytest.warns(UserWarning, match="without a render_mode"):
+        assert plain.render() is None
+    asked = plain.render(mode="rgb_array", agent_index_focus=None)  # as TorchRL's VMAS recipes call it
+    assert asked.shape == frame.shape
+    plain.close()
+
+
+def test_torchrl_pettingzoo_wrapper_takes_the_parallel_env_with_its_infos():
+    """TorchRL's generic wrapper builds its info spec from ``reset()``: flat numeric infos reach the tensordict."""
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    env = PettingZooWrapper(marine_formation_env.parallel_env("paper", action_level="speed"))
+    check_env_specs(env, seed=0)
+    td = env.rollout(3)
+    info = td["next", "vessel", "info"]
+    assert {"reward_coordination", "commanded_speed", "time"} <= set(info.keys())
+    np.testing.assert_allclose(info["time"][:, 0].numpy(), [0.5, 1.0, 1.5])
