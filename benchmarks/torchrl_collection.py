@@ -28,8 +28,8 @@ from typing import Any
 
 from benchmarks.throughput import _time_steps
 from marine_formation_env.atomic import atomic_write_text, check_writable
-from marine_formation_env.cli import ArgumentParser
-from training.torchrl_ppo import collector_kwargs
+from marine_formation_env.cli import ArgumentParser, int_at_least
+from training.torchrl_ppo import make_collector
 
 __all__ = ["main", "run_case"]
 
@@ -45,11 +45,6 @@ def run_case(case: str, b: int, level: str, min_seconds: float, repeats: int) ->
     from marine_formation_env.env import parallel_env
     from marine_formation_env.torchrl import MarineFormationTorchEnv
 
-    try:
-        from torchrl.collectors import Collector
-    except ImportError:  # TorchRL < 0.13
-        from torchrl.collectors import SyncDataCollector as Collector
-
     if case == "wrapper":
         env: Any = PettingZooWrapper(parallel_env("paper", action_level=level), use_mask=True)
         frames = STEPS_PER_BATCH
@@ -59,7 +54,7 @@ def run_case(case: str, b: int, level: str, min_seconds: float, repeats: int) ->
         frames = STEPS_PER_BATCH * b
         done_key = "done"
     env.set_seed(0)
-    collector = Collector(env, None, **collector_kwargs(Collector, frames, -1))  # None: random actions
+    collector = make_collector(env, None, frames, -1)  # None: random actions
     batches = iter(collector)
 
     def step(_: int) -> int:
@@ -131,12 +126,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(json.dumps(run_case(case, int(b), level, float(seconds), int(repeats))))
         return 0
     parser = ArgumentParser(prog="python -m benchmarks.torchrl_collection", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--batch-sizes", type=int, nargs="+", default=list(BATCH_SIZES))
+    parser.add_argument("--batch-sizes", type=int_at_least(1), nargs="+", default=list(BATCH_SIZES))
     parser.add_argument("--level", default="speed", choices=["force", "guidance", "speed"])
     parser.add_argument("--seconds", type=float, default=2.0, help="minimum seconds per timing repeat")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int_at_least(1), default=5)
     parser.add_argument("--json", default=None, help="write the report here")
     args = parser.parse_args(argv)
+    if not args.seconds > 0:
+        parser.error(f"argument --seconds: expected a positive number of seconds, got {args.seconds}")
     if args.json:
         check_writable(args.json, "--json")
     cases = {"wrapper": _worker("wrapper", 1, args.level, args.seconds, args.repeats)}

@@ -61,7 +61,7 @@ from marine_formation_env.atomic import atomic_write_bytes, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
 from training.config import TrainConfigError, apply_overrides, load_config
 
-__all__ = ["DEFAULTS", "TorchPolicy", "load_torch_policy", "resolve", "train"]
+__all__ = ["DEFAULTS", "TorchPolicy", "load_torch_policy", "make_collector", "resolve", "train"]
 
 #: Every key a config may hold, with its default.
 DEFAULTS: dict[str, Any] = {
@@ -288,11 +288,6 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
 
     from marine_formation_env.torchrl import MarineFormationTorchEnv
 
-    try:
-        from torchrl.collectors import Collector
-    except ImportError:  # TorchRL < 0.13
-        from torchrl.collectors import SyncDataCollector as Collector
-
     set_composite_lp_aggregate(False).set()
     seed = cfg["seed"]
     torch.manual_seed(seed)
@@ -301,7 +296,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"])
     critic = _critic_network(obs_dim, n, cfg["hidden"], centralized=cfg["algo"] == "mappo")
-    collector = Collector(env, actor, **collector_kwargs(Collector, cfg["frames_per_batch"], cfg["total_frames"]))
+    collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
         sampler=SamplerWithoutReplacement(),
@@ -372,12 +367,20 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     return summary
 
 
-def collector_kwargs(collector: Any, frames_per_batch: int, total_frames: int) -> dict[str, Any]:
-    """The collector's arguments; the actor needs no env transform (TorchRL ≥ 0.14 asks to be told)."""
+def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
+    """TorchRL's single-process collector over ``env`` (``policy`` None: random actions).
+
+    ``Collector`` in TorchRL ≥ 0.13, ``SyncDataCollector`` before; the actor
+    needs no env transform (TorchRL ≥ 0.14 asks to be told).
+    """
+    try:
+        from torchrl.collectors import Collector
+    except ImportError:  # TorchRL < 0.13
+        from torchrl.collectors import SyncDataCollector as Collector
     kwargs: dict[str, Any] = {"frames_per_batch": frames_per_batch, "total_frames": total_frames}
-    if "auto_register_policy_transforms" in inspect.signature(collector.__init__).parameters:
+    if "auto_register_policy_transforms" in inspect.signature(Collector.__init__).parameters:
         kwargs["auto_register_policy_transforms"] = False
-    return kwargs
+    return Collector(env, policy, **kwargs)
 
 
 def _progress(total: int, enabled: bool) -> Any:
