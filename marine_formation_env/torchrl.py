@@ -60,12 +60,11 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env.core import FormationCore, StepOutput, reset_output
-from marine_formation_env.errors import ConfigError
+from marine_formation_env.errors import ConfigError, check_seed
 from marine_formation_env.frontend import (
     REWARD_INFO_KEYS,
     InitialStates,
     Rendering,
-    formation_seeds,
     resolve_config,
     vessel_infos,
 )
@@ -222,7 +221,7 @@ class MarineFormationTorchEnv(EnvBase):
     # ------------------------------------------------------------------ seeding and reset
     def _set_seed(self, seed: int | None) -> None:
         """Seed the next reset: formation ``b`` gets ``seed + b`` (module docstring)."""
-        self._pending_seed = None if seed is None else formation_seeds(seed, 1)[0]
+        self._pending_seed = check_seed(seed)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
         mask = self._reset_mask(tensordict)

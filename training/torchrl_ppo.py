@@ -59,7 +59,7 @@ import yaml
 
 from marine_formation_env.atomic import atomic_write_bytes, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
-from training.config import TrainConfigError, apply_overrides, load_config
+from training.config import TrainConfigError, _is_number, _whole, apply_overrides, load_config
 
 __all__ = ["DEFAULTS", "TorchPolicy", "load_torch_policy", "make_collector", "resolve", "train"]
 
@@ -134,17 +134,11 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
 
 
 def _is_whole(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and float(value).is_integer()
-
-
-def _whole(key: str, value: Any, minimum: int) -> int:
-    if not _is_whole(value) or value < minimum:
-        raise TrainConfigError(f"{key} must be a whole number ≥ {minimum}, got {value!r}")
-    return int(value)
+    return _is_number(value) and math.isfinite(value) and float(value).is_integer()
 
 
 def _number(key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if not _is_number(value) or not math.isfinite(value):
         raise TrainConfigError(f"{key} must be a finite number, got {value!r}")
     return float(value)
 
