@@ -8,6 +8,7 @@ a markdown table and a figure of heat maps (one row per policy)::
 
     python -m baselines.sweep --out results/sweep
     python -m baselines.sweep --scenario radio --loss 0,0.2,0.5 --latency 0,1,2 --episodes 5
+    python -m baselines.sweep --address HEAD_IP:6379 --episodes 20   # cells as Ray tasks on a cluster
 
 The base scenario keeps everything but the swept settings: loss is Bernoulli
 (a Gilbert–Elliott ``burst`` of the scenario is dropped) and the latency is
@@ -39,7 +40,7 @@ from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrid
 from marine_formation_env.env import parallel_env
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 
-__all__ = ["METRICS", "main", "sweep"]
+__all__ = ["METRICS", "main", "run_cell", "sweep"]
 
 #: What each cell reports: key, label, unit.
 METRICS = (
@@ -83,12 +84,19 @@ def sweep(
     overrides: dict[str, Any],
     paper_initial_state: bool = False,
     progress: bool = True,
+    address: str | None = None,
 ) -> dict[str, Any]:
     """Run the grid and return a JSON-friendly report (see the module docstring).
 
     ``report["cells"][policy][i][k]`` holds the metrics at ``losses[i]``,
     ``latencies[k]`` (means over episodes; ``settling_time`` counts an
     unsettled episode as the horizon, ``settled_fraction`` says how many settled).
+
+    With ``address`` (``"auto"``, ``"HOST:PORT"`` of a running Ray cluster, or
+    ``"local"`` for a Ray instance of this process), every cell (a pair loss,
+    latency with all its policies and episodes) is one Ray task. A cell's
+    numbers depend only on its settings and the seeds, so the report is the
+    same as a local run's.
     """
     if episodes < 1:
         raise ValueError(f"--episodes must be ≥ 1, got {episodes}")
@@ -98,26 +106,29 @@ def sweep(
         base.setdefault("init_noise", GENERATED_INIT_NOISE)
         base.setdefault("safety_distance", 5.0)
     channel_override = dict(base.pop("channel", {}) or {})
-    cells: dict[str, list[list[dict[str, Any]]]] = {p: [] for p in policies}
-    bar = progress_bar(len(losses) * len(latencies) * len(policies) * episodes, progress, desc="sweep")
-    config = None
     seeds = [seed + k for k in range(episodes)]
-    for p in losses:
-        for label in policies:
-            cells[label].append([])  # the row of loss p
-        for latency in latencies:
-            channel = {**channel_override, "loss": p, "latency": latency, "burst": None}
-            env = parallel_env(scenario, **base, channel=channel)
-            config = env.config
-            for label in policies:
-                results, _ = episode_reports(make_policy(label, env, seed), config, seeds)
-                if bar is not None:
-                    bar.update(episodes)
-                cells[label][-1].append(_cell(results, config.horizon))
-            env.close()
+    grid = [(p, latency) for p in losses for latency in latencies]
+    jobs = [
+        (scenario, {**base, "channel": {**channel_override, "loss": p, "latency": latency, "burst": None}})
+        for p, latency in grid
+    ]
+    # the scenario must build before any work is sent out: a bad override fails here, by name
+    config = parallel_env(jobs[0][0], **jobs[0][1]).config
+    bar = progress_bar(len(jobs) * len(policies) * episodes, progress, desc="sweep")
+    if address is None:
+        results = []
+        for job in jobs:
+            results.append(run_cell(*job, policies, seeds))
+            if bar is not None:
+                bar.update(len(policies) * episodes)
+    else:
+        results = _run_on_ray(address, jobs, policies, seeds, bar, len(policies) * episodes)
     if bar is not None:
         bar.close()
-    assert config is not None
+    cells: dict[str, list[list[dict[str, Any]]]] = {
+        label: [[results[i * len(latencies) + k][label] for k in range(len(latencies))] for i in range(len(losses))]
+        for label in policies
+    }
     return {
         "scenario": scenario,
         "overrides": {k: repr(v) for k, v in base.items()},
@@ -129,6 +140,45 @@ def sweep(
         "config": config.to_dict(),
         "cells": cells,
     }
+
+
+def run_cell(
+    scenario: str, overrides: dict[str, Any], policies: Sequence[str], seeds: Sequence[int]
+) -> dict[str, dict[str, Any]]:
+    """One cell of the grid: every policy's metrics over the episodes of ``seeds`` (a pure function of its inputs)."""
+    env = parallel_env(scenario, **overrides)
+    try:
+        return {
+            label: _cell(episode_reports(make_policy(label, env, seeds[0]), env.config, seeds)[0], env.config.horizon)
+            for label in policies
+        }
+    finally:
+        env.close()
+
+
+def _run_on_ray(
+    address: str,
+    jobs: list[tuple[str, dict[str, Any]]],
+    policies: Sequence[str],
+    seeds: list[int],
+    bar: Any,
+    per_cell: int,
+) -> list[dict[str, dict[str, Any]]]:
+    """The cells as Ray tasks (one CPU each) on the cluster at ``address``; results in grid order."""
+    from training.ray_cluster import connect
+
+    ray = connect(address)
+    task = ray.remote(num_cpus=1)(run_cell)
+    pending = {task.remote(*job, list(policies), seeds): i for i, job in enumerate(jobs)}
+    results: list[Any] = [None] * len(jobs)
+    waiting = list(pending)
+    while waiting:
+        done, waiting = ray.wait(waiting, num_returns=1)
+        for ref in done:
+            results[pending[ref]] = ray.get(ref)
+            if bar is not None:
+                bar.update(per_cell)
+    return results
 
 
 def format_markdown(report: dict[str, Any]) -> str:
@@ -218,13 +268,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         dest="policies",
         help="reference[:extrapolate,ilos=σ]; repeatable (default: reference and reference:extrapolate)",
     )
-    parser.add_argument(
-        "--episodes", type=int_at_least(1), default=3, help="episodes per cell and policy (default 3)"
-    )
+    parser.add_argument("--episodes", type=int_at_least(1), default=3, help="episodes per cell and policy (default 3)")
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override")
     parser.add_argument("--paper-initial-state", action="store_true", help="start from the paper's initial state")
     parser.add_argument("--out", type=Path, default=Path("results/sweep"), help="output prefix (.json/.md/.png)")
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="run the cells as Ray tasks on this cluster: HOST:PORT, 'auto' or 'local' (default: here, one by one)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     args = parser.parse_args(argv)
     policies = args.policies or ["reference", "reference:extrapolate"]
@@ -244,8 +297,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             parse_overrides(args.set),
             args.paper_initial_state,
             not args.quiet,
+            args.address,
         )
-    except (ValueError, KeyError, TypeError) as err:
+    except (ValueError, KeyError, TypeError, ImportError, ConnectionError) as err:
         parser.error(str(err))
     table = format_markdown(report)
     atomic_write_text(args.out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))

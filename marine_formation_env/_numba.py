@@ -111,13 +111,9 @@ def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0,
     else:
         acc = accelerations(p, u, v, r)
         if level == 1:
-            tau_u, tau_r = heading_tracking_inputs(
-                p, g, cmd1, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
-            )
+            tau_u, tau_r = heading_tracking_inputs(p, g, cmd1, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
         else:
-            tau_u, tau_r = path_following_inputs(
-                p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc
-            )
+            tau_u, tau_r = path_following_inputs(p, g, y - d_y, psi, u, v, r, u_c0 + u_c_dot * t, u_c_dot, printed, acc)
         tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)
     if c_speed == 0.0 and c_amp == 0.0:  # still water (Current.is_zero): no current term, as in the numpy path
         return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, None, None)
@@ -314,8 +310,22 @@ def _kernel(  # type: ignore[no-untyped-def]
             t1, step = time1[b], steps[b]
             if restart[b]:
                 _channel_restart(
-                    b, c_depth, c_with_burst, c_p_bad, c_uniforms, c_upos, c_tx, c_up, c_has, c_failed,
-                    c_theta, c_xdot, c_time, c_pvalid, c_next, c_bad,
+                    b,
+                    c_depth,
+                    c_with_burst,
+                    c_p_bad,
+                    c_uniforms,
+                    c_upos,
+                    c_tx,
+                    c_up,
+                    c_has,
+                    c_failed,
+                    c_theta,
+                    c_xdot,
+                    c_time,
+                    c_pvalid,
+                    c_next,
+                    c_bad,
                 )
             if has_noise:  # without noise the measurement is the state, whose theta, xdot the step left
                 _channel_measure(b, state, c_normals, c_npos, c_scale, c_measured, offsets, theta, xdot)
@@ -324,22 +334,72 @@ def _kernel(  # type: ignore[no-untyped-def]
                 for j in range(n):
                     xdot[b, j] += vc_x
             _channel_send(
-                b, state, t1, step, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_up, c_failed, c_bad,
-                c_tx, c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next, theta, xdot,
+                b,
+                state,
+                t1,
+                step,
+                c_rule,
+                c_graphs,
+                c_ends,
+                c_loss,
+                c_uniforms,
+                c_upos,
+                c_up,
+                c_failed,
+                c_bad,
+                c_tx,
+                c_pvalid,
+                c_ptheta,
+                c_pxdot,
+                c_ptime,
+                c_next,
+                theta,
+                xdot,
             )
             if step >= c_next[b]:  # the ring of pending messages is read only at an instant where one arrives
-                _channel_deliver(b, step, c_depth, c_has, c_theta, c_xdot, c_time, c_pvalid, c_ptheta, c_pxdot,
-                                 c_ptime, c_next)
+                _channel_deliver(
+                    b, step, c_depth, c_has, c_theta, c_xdot, c_time, c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next
+                )
             _channel_observe(
-                b, t1, has_noise, c_measured, offsets, u_d, u_d_rate, c_up, c_has, c_theta, c_xdot, c_time,
-                theta, xdot, c_slots, c_low, c_high, obs,
+                b,
+                t1,
+                has_noise,
+                c_measured,
+                offsets,
+                u_d,
+                u_d_rate,
+                c_up,
+                c_has,
+                c_theta,
+                c_xdot,
+                c_time,
+                theta,
+                xdot,
+                c_slots,
+                c_low,
+                c_high,
+                obs,
             )
 
 
 @njit(inline="always")
 def _channel_restart(  # type: ignore[no-untyped-def]
-    b, depth, with_burst, p_bad, uniforms, upos, transmitted, up, has_message, failed,
-    held_theta, held_xdot, held_time, pend_valid, next_arrival, bad,
+    b,
+    depth,
+    with_burst,
+    p_bad,
+    uniforms,
+    upos,
+    transmitted,
+    up,
+    has_message,
+    failed,
+    held_theta,
+    held_xdot,
+    held_time,
+    pend_valid,
+    next_arrival,
+    bad,
 ):
     """``LinkChannel.reset`` for formation ``b``: no messages, every link live, Gilbert–Elliott chains stationary."""
     n = up.shape[1]
@@ -379,12 +439,50 @@ def _channel_measure(b, state, normals, npos, scale, measured, offsets, theta, x
 
 @njit(inline="always")
 def _channel_send(  # type: ignore[no-untyped-def]
-    b, state, t, step, rule, graphs, ends, loss, uniforms, upos, up, failed, bad,
-    transmitted, pend_valid, pend_theta, pend_xdot, pend_time, next_arrival, theta, xdot,
+    b,
+    state,
+    t,
+    step,
+    rule,
+    graphs,
+    ends,
+    loss,
+    uniforms,
+    upos,
+    up,
+    failed,
+    bad,
+    transmitted,
+    pend_valid,
+    pend_theta,
+    pend_xdot,
+    pend_time,
+    next_arrival,
+    theta,
+    xdot,
 ):
     """``LinkChannel.update`` for formation ``b``: link states, transmissions, losses, delays into the ring."""
-    (tdma, every, with_failure, p_fail, p_recover, with_burst, p_gb, p_bg, _p_bad, loss_good, loss_bad,
-     latency, jitter, with_delay, max_delay_steps, depth, dt, link_range, with_range) = rule
+    (
+        tdma,
+        every,
+        with_failure,
+        p_fail,
+        p_recover,
+        with_burst,
+        p_gb,
+        p_bg,
+        _p_bad,
+        loss_good,
+        loss_bad,
+        latency,
+        jitter,
+        with_delay,
+        max_delay_steps,
+        depth,
+        dt,
+        link_range,
+        with_range,
+    ) = rule
     n = up.shape[1]
     nn = n * n
     # which part of a row of uniforms holds which draw: failure, Gilbert-Elliott, loss, jitter
@@ -451,7 +549,17 @@ def _channel_send(  # type: ignore[no-untyped-def]
 
 @njit(inline="always")
 def _channel_deliver(  # type: ignore[no-untyped-def]
-    b, step, depth, has_message, held_theta, held_xdot, held_time, pend_valid, pend_theta, pend_xdot, pend_time,
+    b,
+    step,
+    depth,
+    has_message,
+    held_theta,
+    held_xdot,
+    held_time,
+    pend_valid,
+    pend_theta,
+    pend_xdot,
+    pend_time,
     next_arrival,
 ):
     """The messages of ``b`` that arrive at ``step`` (zero-delay ones sent just now included): newest kept."""
@@ -477,8 +585,24 @@ def _channel_deliver(  # type: ignore[no-untyped-def]
 
 @njit(inline="always")
 def _channel_observe(  # type: ignore[no-untyped-def]
-    b, t, has_noise, measured, offsets, u_d, u_d_rate, up, has_message, held_theta, held_xdot, held_time,
-    theta, xdot, slot_index, obs_low, obs_high, obs,
+    b,
+    t,
+    has_noise,
+    measured,
+    offsets,
+    u_d,
+    u_d_rate,
+    up,
+    has_message,
+    held_theta,
+    held_xdot,
+    held_time,
+    theta,
+    xdot,
+    slot_index,
+    obs_low,
+    obs_high,
+    obs,
 ):
     """The observations of ``b`` through the channel (``LinkChannel.slots``): own measurement, held messages.
 
@@ -502,8 +626,12 @@ def _channel_observe(  # type: ignore[no-untyped-def]
             i = slot_index[j, kk]
             base = OWN_SIZE + SLOT_SIZE * kk
             if up[b, j, i] and has_message[b, j, i]:
-                feats = (1.0, theta[b, j] - held_theta[b, j, i], xdot[b, j] - held_xdot[b, j, i],
-                         t - held_time[b, j, i])
+                feats = (
+                    1.0,
+                    theta[b, j] - held_theta[b, j, i],
+                    xdot[b, j] - held_xdot[b, j, i],
+                    t - held_time[b, j, i],
+                )
             else:
                 feats = (0.0, 0.0, 0.0, 0.0)
             for f in range(SLOT_SIZE):

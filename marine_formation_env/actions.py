@@ -53,5 +53,3 @@ def normalized_actions(config: ScenarioConfig, **commands: np.ndarray) -> np.nda
         if cfg.action_level == "guidance":
             cols.append(np.asarray(commands["psi_d"]) / cfg.psi_max)
     return np.clip(np.stack(np.broadcast_arrays(*cols), axis=-1), -1.0, 1.0)
-
-

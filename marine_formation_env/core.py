@@ -195,13 +195,17 @@ class FormationCore:
         self._current: tuple[float, float, float, float, float] | None = (
             None if config.current.is_zero else config.current.coefficients
         )
-        self.channel = None if config.ideal_observations else LinkChannel(
-            config.channel,
-            n,
-            config.dt,
-            [(dwell, g.adjacency) for dwell, g in config.topology_schedule] or [(math.inf, config.graph.adjacency)],
-            config.max_steps,
-            self.num_envs,
+        self.channel = (
+            None
+            if config.ideal_observations
+            else LinkChannel(
+                config.channel,
+                n,
+                config.dt,
+                [(dwell, g.adjacency) for dwell, g in config.topology_schedule] or [(math.inf, config.graph.adjacency)],
+                config.max_steps,
+                self.num_envs,
+            )
         )
         self.sensor_noise = (
             None if config.sensor_noise.is_zero else SensorNoiseSource(config.sensor_noise, n, self.num_envs)

@@ -18,6 +18,7 @@ from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
 
+
 class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     """Coordinated path following of underactuated surface vessels under a directed graph.
 
@@ -393,6 +394,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         """``{agent: info}`` in the per-vessel schema (:mod:`marine_formation_env.frontend`)."""
         stacked = vessel_infos(out, self.core.time)
         return {agent: one_entry(stacked, (0, self._index[agent])) for agent in self.agents}
+
 
 def parallel_env(
     scenario: str | ScenarioConfig = "paper", render_mode: str | None = None, **overrides: Any

@@ -172,9 +172,7 @@ class ResetRequest:
     initial_state: np.ndarray | None
 
 
-def read_reset(
-    config: ScenarioConfig, seed: Any, options: Any, num_formations: int | None = None
-) -> ResetRequest:
+def read_reset(config: ScenarioConfig, seed: Any, options: Any, num_formations: int | None = None) -> ResetRequest:
     """Check every ``reset`` argument before anything changes, the same way for every front end.
 
     Args:
@@ -311,11 +309,13 @@ class Rendering:
         config: the scenario (the camera frames its workspace).
         render_mode: ``"rgb_array"``, ``"human"`` or None (then :meth:`frame`
             warns and returns None, as gymnasium's envs do).
+        width: frame width in pixels (the height follows the workspace's shape).
     """
 
-    def __init__(self, config: ScenarioConfig, render_mode: str | None) -> None:
+    def __init__(self, config: ScenarioConfig, render_mode: str | None, width: int = 1280) -> None:
         self.config = config
         self.render_mode = render_mode
+        self.width = width
         self._renderer: Any = None
 
     def frame(self, core: FormationCore, b: int = 0) -> np.ndarray | None:
@@ -328,7 +328,7 @@ class Rendering:
         if self._renderer is None:
             from marine_formation_env.render import FormationRenderer
 
-            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human")
+            self._renderer = FormationRenderer(self.config, human=self.render_mode == "human", width_px=self.width)
         image: np.ndarray | None = self._renderer.draw(core.state[b], float(core.time[b]), core.links_up(b))
         return image
 

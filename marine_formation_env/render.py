@@ -92,6 +92,10 @@ class FormationRenderer:
     travelled so far. Bottom panel: a close-up that follows the formation's
     centroid (``zoom_width`` metres wide) so hulls, slots and link arrows stay
     legible when the workspace is kilometres long.
+
+    The figure and its artists are made once; a frame moves them (hulls,
+    slots, trails, arrows, titles, the close-up's limits) and redraws, which
+    is what keeps recording an evaluation video cheap.
     """
 
     def __init__(
@@ -123,6 +127,64 @@ class FormationRenderer:
         grid = self.fig.add_gridspec(2, 1, height_ratios=[world_h, zoom_h])
         self.ax_world = self.fig.add_subplot(grid[0])
         self.ax_zoom = self.fig.add_subplot(grid[1])
+        self._world = self._make_scene(self.ax_world, link_arrows=False, trail_alpha=1.0)
+        self._zoom = self._make_scene(self.ax_zoom, link_arrows=True, trail_alpha=0.6)
+        ax = self.ax_world
+        ax.set_xlim(x_lo, x_hi)
+        ax.set_ylim(y_lo, y_hi)
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_ylabel("y [m]")
+        self._title = ax.set_title(" ", fontsize=9)
+        ax = self.ax_zoom
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_title("close-up: hulls to scale, formation slots (circles), links i → j (arrows)", fontsize=8)
+        self._place_zoom(np.column_stack([config.formation, np.zeros((config.n_vessels, 4))]))
+        self.fig.tight_layout()  # once: the layout does not change from frame to frame
+        # what moves is drawn over a cached background (blitting): the world panel's moving artists
+        # and title, and the whole close-up (its limits, hence its ticks, change every frame)
+        self._moving = [a for group in self._world.values() for a in group] + [self._title]
+        for artist in self._moving:
+            artist.set_animated(True)
+        self._background: Any = None
+
+    def _make_scene(self, ax: Any, link_arrows: bool, trail_alpha: float) -> dict[str, list[Any]]:
+        """The artists of one panel at a neutral pose: paths, slots, hulls, trails (and arrows, labels)."""
+        from matplotlib.patches import Circle, FancyArrowPatch, Polygon
+
+        cfg = self.config
+        length = cfg.params.length or 40.0
+        scene: dict[str, list[Any]] = {"slots": [], "hulls": [], "trails": [], "arrows": [], "labels": []}
+        for j, (d_x, d_y) in enumerate(cfg.formation):
+            color = vessel_color(j)
+            ax.axhline(d_y, color=color, lw=0.8, ls="--", alpha=0.5)
+            scene["slots"].append(ax.add_patch(Circle((d_x, d_y), 0.4 * length, fill=False, ec=color, lw=1.0)))
+            (trail,) = ax.plot([], [], color=color, lw=0.8, alpha=trail_alpha)
+            scene["trails"].append(trail)
+        if link_arrows:
+            for _ in cfg.graph.links:
+                arrow = FancyArrowPatch(
+                    (0.0, 0.0),
+                    (1.0, 0.0),
+                    arrowstyle="-|>",
+                    mutation_scale=12,
+                    lw=1.0,
+                    shrinkA=10,
+                    shrinkB=10,
+                    connectionstyle="arc3,rad=0.15",
+                )
+                scene["arrows"].append(ax.add_patch(arrow))
+        for j in range(cfg.n_vessels):
+            hull = Polygon(np.zeros((6, 2)), closed=True, fc=vessel_color(j), ec="k", lw=0.6)
+            scene["hulls"].append(ax.add_patch(hull))
+            if link_arrows:
+                scene["labels"].append(
+                    ax.annotate(
+                        f"vessel_{j}", (0.0, 0.0), xytext=(0, 9), textcoords="offset points", ha="center", fontsize=8
+                    )
+                )
+        return scene
 
     def draw(self, state: np.ndarray, time: float, links: np.ndarray | None = None) -> np.ndarray | None:
         """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human.
@@ -136,35 +198,61 @@ class FormationRenderer:
             self._trail = []
         self._trail.append(np.array(state[:, :2]))
         trail = np.stack(self._trail)  # (T, n, 2)
-        x_lo, x_hi, y_lo, y_hi = cfg.workspace
         offsets = cfg.formation
         spread = float(np.ptp(state[:, 0] - offsets[:, 0]))
         cross = float(np.max(np.abs(state[:, 1] - offsets[:, 1])))
-
-        ax = self.ax_world
-        ax.clear()
-        self._draw_scene(ax, state)
-        for j in range(cfg.n_vessels):
-            ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8)
-        ax.set_xlim(x_lo, x_hi)
-        ax.set_ylim(y_lo, y_hi)
-        ax.set_aspect("equal", adjustable="box")
-        ax.set_ylabel("y [m]")
+        for scene in (self._world, self._zoom):
+            self._move_scene(scene, state, trail, links)
         sea = ""
         if not cfg.current.is_zero:
             vc_x, vc_y = cfg.current.velocity(time)
             sea = f"   current {float(np.hypot(vc_x, vc_y)):.2f} m/s towards {np.degrees(cfg.current.direction):.0f}°"
-        ax.set_title(
+        self._title.set_text(
             f"{cfg.name} ({cfg.action_level})   t = {time:6.1f} s   coordination spread {spread:8.2f} m   "
-            f"max |y − D_y| {cross:7.2f} m{sea}",
-            fontsize=9,
+            f"max |y − D_y| {cross:7.2f} m{sea}"
         )
+        self._place_zoom(state)
+        canvas = self.fig.canvas
+        if self._background is None:
+            self.ax_zoom.set_visible(False)
+            canvas.draw()
+            self._background = canvas.copy_from_bbox(self.fig.bbox)  # type: ignore[attr-defined]
+            self.ax_zoom.set_visible(True)
+        canvas.restore_region(self._background)  # type: ignore[attr-defined]
+        for artist in self._moving:
+            self.fig.draw_artist(artist)
+        self.fig.draw_artist(self.ax_zoom)
+        if self.human:
+            canvas.blit(self.fig.bbox)
+            canvas.flush_events()
+            self._plt.pause(1.0 / 30.0)
+            return None
+        rgba = np.asarray(canvas.buffer_rgba())  # type: ignore[attr-defined]
+        return np.array(even_frame(rgba)[..., :3])
 
-        ax = self.ax_zoom
-        ax.clear()
-        self._draw_scene(ax, state, link_arrows=True, links=links)
-        for j in range(cfg.n_vessels):
-            ax.plot(trail[:, j, 0], trail[:, j, 1], color=vessel_color(j), lw=0.8, alpha=0.6)
+    def _move_scene(
+        self, scene: dict[str, list[Any]], state: np.ndarray, trail: np.ndarray, links: np.ndarray | None
+    ) -> None:
+        cfg = self.config
+        offsets = cfg.formation
+        length = cfg.params.length or 40.0
+        beam = cfg.params.beam or 0.25 * length
+        x_bar = float(np.mean(state[:, 0] - offsets[:, 0]))
+        for j, (x, y, psi, *_rest) in enumerate(state):
+            scene["slots"][j].set_center((x_bar + offsets[j, 0], offsets[j, 1]))
+            scene["hulls"][j].set_xy(hull_polygon(x, y, psi, length, beam))
+            scene["trails"][j].set_data(trail[:, j, 0], trail[:, j, 1])
+            if scene["labels"]:
+                scene["labels"][j].xy = (float(x), float(y))
+        for arrow, (i, j) in zip(scene["arrows"], cfg.graph.links, strict=False):  # i transmits to j
+            live = links is None or bool(links[j, i])
+            arrow.set_positions((float(state[i, 0]), float(state[i, 1])), (float(state[j, 0]), float(state[j, 1])))
+            arrow.set_color("0.3" if live else "0.75")
+            arrow.set_linestyle("-" if live else ":")
+
+    def _place_zoom(self, state: np.ndarray) -> None:
+        """The close-up's window: centred on the formation, wide enough for every vessel and slot."""
+        offsets = self.config.formation
         cx, cy = float(np.mean(state[:, 0])), float(np.mean(offsets[:, 1]))
         ratio = 0.3  # height / width of the close-up window
         half_w = max(
@@ -172,58 +260,8 @@ class FormationRenderer:
             0.6 * float(np.ptp(state[:, 0])) + 50.0,
             (0.6 * float(np.ptp(np.append(state[:, 1], offsets[:, 1]))) + 40.0) / ratio,
         )
-        ax.set_xlim(cx - half_w, cx + half_w)
-        ax.set_ylim(cy - ratio * half_w, cy + ratio * half_w)
-        ax.set_aspect("equal", adjustable="box")
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_title("close-up: hulls to scale, formation slots (circles), links i → j (arrows)", fontsize=8)
-        self.fig.tight_layout()
-        if self.human:
-            self.fig.canvas.draw_idle()
-            self._plt.pause(1.0 / 30.0)
-            return None
-        self.fig.canvas.draw()
-        rgba = np.asarray(self.fig.canvas.buffer_rgba())  # type: ignore[attr-defined]
-        return np.array(even_frame(rgba)[..., :3])
-
-    def _draw_scene(
-        self, ax: Any, state: np.ndarray, link_arrows: bool = False, links: np.ndarray | None = None
-    ) -> None:
-        from matplotlib.patches import Circle, FancyArrowPatch, Polygon
-
-        cfg = self.config
-        offsets = cfg.formation
-        length = cfg.params.length or 40.0
-        beam = cfg.params.beam or 0.25 * length
-        for j, (_, d_y) in enumerate(offsets):
-            ax.axhline(d_y, color=vessel_color(j), lw=0.8, ls="--", alpha=0.5)
-        x_bar = float(np.mean(state[:, 0] - offsets[:, 0]))
-        for j, (d_x, d_y) in enumerate(offsets):
-            ax.add_patch(Circle((x_bar + d_x, d_y), 0.4 * length, fill=False, ec=vessel_color(j), lw=1.0))
-        if link_arrows:
-            for i, j in cfg.graph.links:  # i transmits to j
-                live = links is None or bool(links[j, i])
-                ax.add_patch(
-                    FancyArrowPatch(
-                        (float(state[i, 0]), float(state[i, 1])),
-                        (float(state[j, 0]), float(state[j, 1])),
-                        arrowstyle="-|>",
-                        mutation_scale=12,
-                        color="0.3" if live else "0.75",
-                        lw=1.0,
-                        ls="-" if live else ":",
-                        shrinkA=10,
-                        shrinkB=10,
-                        connectionstyle="arc3,rad=0.15",
-                    )
-                )
-        for j, (x, y, psi, *_rest) in enumerate(state):
-            ax.add_patch(
-                Polygon(hull_polygon(x, y, psi, length, beam), closed=True, fc=vessel_color(j), ec="k", lw=0.6)
-            )
-            if link_arrows:
-                ax.annotate(f"vessel_{j}", (x, y), xytext=(0, 9), textcoords="offset points", ha="center", fontsize=8)
+        self.ax_zoom.set_xlim(cx - half_w, cx + half_w)
+        self.ax_zoom.set_ylim(cy - ratio * half_w, cy + ratio * half_w)
 
     def close(self) -> None:
         if self._plt is not None:

@@ -219,7 +219,6 @@ class ScenarioConfig:
         return out
 
 
-
 def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
     """Build a validated :class:`ScenarioConfig` from a scenario name and overrides.
 
@@ -320,9 +319,7 @@ def _resolve_formation(formation: Any, n: int) -> np.ndarray:
     return offsets
 
 
-def _resolve_graphs(
-    s: Settings, n: int, topology_seed: int
-) -> tuple[tuple[tuple[float, CommGraph], ...], CommGraph]:
+def _resolve_graphs(s: Settings, n: int, topology_seed: int) -> tuple[tuple[tuple[float, CommGraph], ...], CommGraph]:
     """The schedule of graphs (empty for a fixed graph) and the graph of the links that ever exist."""
     schedule = _resolve_schedule(s.topology_schedule, n, topology_seed)
     if schedule:

@@ -312,7 +312,6 @@ SCENARIOS: dict[str, dict[str, Any]] = {
 GENERATED_INIT_NOISE = InitNoise(x=40.0, y=20.0, psi=0.3, u=1.0)
 
 
-
 def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
     """The settings of a named scenario with keyword overrides applied (nothing resolved yet).
 

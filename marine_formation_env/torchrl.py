@@ -106,6 +106,9 @@ class MarineFormationTorchEnv(EnvBase):
         group: the name of the agent group; ``"agents"`` gives ``VmasEnv``'s keys,
             so scripts written for VMAS (TorchRL's multi-agent recipes) run unchanged.
         seed: if given, :meth:`set_seed` is called with it (as ``VmasEnv`` does).
+        render_width: width of rendered frames in pixels (≥ 320; the height
+            follows the workspace, both even). Recorders keep every frame of an
+            episode in memory: 800 frames of 640 × 352 take 0.5 GB.
         **overrides: any field of the scenario's settings (``action_level``,
             ``n_vessels``, ``topology``, ``channel``, ...); an unknown key raises
             :class:`~marine_formation_env.errors.UnknownSettingError` (a ``TypeError``).
@@ -128,12 +131,15 @@ class MarineFormationTorchEnv(EnvBase):
         render_mode: str | None = None,
         group: str = GROUP,
         seed: int | None = None,
+        render_width: int = 640,
         **overrides: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ConfigError(f"num_envs must be a whole number ≥ 1, got {num_envs!r}")
         if render_mode not in (None, "rgb_array"):
             raise ConfigError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if isinstance(render_width, bool) or not isinstance(render_width, (int, np.integer)) or render_width < 320:
+            raise ConfigError(f"render_width must be a whole number of pixels ≥ 320, got {render_width!r}")
         if not isinstance(group, str) or not group or group.startswith("_") or group in _ROOT_KEYS:
             raise ConfigError(f"group must be a non-empty name other than {sorted(_ROOT_KEYS)}, got {group!r}")
         self.config: ScenarioConfig = resolve_config(scenario, overrides)
@@ -146,7 +152,9 @@ class MarineFormationTorchEnv(EnvBase):
         self._pending_seed: int | None = None
         self._obs = np.zeros((self.num_envs, self.n_agents, self.core.layout.dim), dtype=np.float32)
         self._has_speed = self.config.action_level != "force"
-        self._rendering = Rendering(self.config, "rgb_array")  # drawn only when a frame is asked for
+        # drawn only when a frame is asked for; narrower than the ParallelEnv's 1280 px, as evaluation
+        # videos hold every step of an episode in memory (800 frames at the speed level)
+        self._rendering = Rendering(self.config, "rgb_array", width=int(render_width))
         self.group = group
         self._make_specs()
         if seed is not None:

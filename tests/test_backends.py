@@ -90,8 +90,8 @@ def assert_states_close(fast: np.ndarray, ref: np.ndarray) -> None:
 def assert_observations_close(fast: np.ndarray, ref: np.ndarray, n: int) -> None:
     assert fast.dtype == ref.dtype == np.float32 and fast.shape == ref.shape
     own = ObservationLayout(n).own
-    links = ref[..., own :: 4]
-    assert np.array_equal(fast[..., own :: 4], links), "link bits differ"
+    links = ref[..., own::4]
+    assert np.array_equal(fast[..., own::4], links), "link bits differ"
     assert set(np.unique(links)) <= {0.0, 1.0}
     ulp = np.spacing(np.maximum(np.abs(ref), np.abs(fast)))
     assert np.all(np.abs(fast - ref) <= OBS_ULPS * ulp), np.max(np.abs(fast - ref) / ulp)

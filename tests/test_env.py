@@ -310,9 +310,7 @@ def test_leaving_workspace_terminates():
     for agent in env.possible_agents:
         assert infos[agent]["out_of_bounds"] is True
         assert infos[agent]["collision"] is False
-        assert reward_terms(infos[agent])["terminal"] == pytest.approx(
-            -DEFAULT_TOTAL_WEIGHT * (30.0 - 0.1), rel=1e-9
-        )
+        assert reward_terms(infos[agent])["terminal"] == pytest.approx(-DEFAULT_TOTAL_WEIGHT * (30.0 - 0.1), rel=1e-9)
         assert rewards[agent] == pytest.approx(sum(reward_terms(infos[agent]).values()), rel=1e-12)
 
 

@@ -413,7 +413,6 @@ def test_round_trip_of_every_preset_and_of_a_schedule():
     assert math.isinf(again.channel.range)
 
 
-
 # --------------------------------------------------------------------------- unknown keywords
 
 

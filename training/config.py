@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import copy
 import inspect
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -260,6 +261,32 @@ def _whole(key: str, value: Any, minimum: int) -> int:
     if _is_number(value) and float(value).is_integer() and value >= minimum:
         return int(value)
     raise TrainConfigError(f"{key} must be a whole number ≥ {minimum}, got {value!r}")
+
+
+def _is_whole(value: Any) -> bool:
+    return _is_number(value) and math.isfinite(value) and float(value).is_integer()
+
+
+def _number(key: str, value: Any) -> float:
+    """``value`` as a float if it is a finite number (not a bool), else raise naming ``key``."""
+    if not _is_number(value) or not math.isfinite(value):
+        raise TrainConfigError(f"{key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _positive(key: str, value: Any) -> float:
+    """``value`` as a float if it is a finite number > 0, else raise naming ``key``."""
+    number = _number(key, value)
+    if number <= 0:
+        raise TrainConfigError(f"{key} must be > 0, got {value!r}")
+    return number
+
+
+def _hidden(value: Any) -> list[int]:
+    """Hidden layer sizes: a non-empty list of whole numbers ≥ 1."""
+    if not isinstance(value, list) or not value or not all(_is_whole(h) and h >= 1 for h in value):
+        raise TrainConfigError(f"hidden must be a non-empty list of whole numbers ≥ 1, got {value!r}")
+    return [int(h) for h in value]
 
 
 def _check_policy(resolved: dict[str, Any], cls: Any) -> None:

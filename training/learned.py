@@ -22,7 +22,7 @@ from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from training.config import algo_class
 
-__all__ = ["UNREADABLE", "ModelPolicy", "UnreadableRunError", "load_learned_policy", "run_folder_of"]
+__all__ = ["UNREADABLE", "ModelPolicy", "UnreadableRunError", "evaluate_run", "load_learned_policy", "run_folder_of"]
 
 
 class ModelPolicy(BatchPolicy):
@@ -63,13 +63,22 @@ def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[A
         path: ``runs/NAME/model.zip`` (or any checkpoint ``.zip`` in a run
             folder) or the run folder itself; a run folder of
             ``training.torchrl_ppo`` (``policy.pt``) gives a
-            :class:`~training.torchrl_ppo.TorchPolicy`.
+            :class:`~training.torchrl_ppo.TorchPolicy`, one of
+            ``training.rllib_ppo`` (``checkpoint/``) a
+            :class:`~training.rllib_ppo.RLlibPolicy`.
 
     Returns:
         ``(policy, config)`` where ``config`` is the run's resolved training
         config (``scenario`` and ``env_kwargs`` say what it was trained on).
     """
     path = Path(path)
+    if path.is_dir() and ((path / "checkpoint" / "learner_group").is_dir() or (path / "learner_group").is_dir()):
+        from training.rllib_ppo import load_rllib_policy  # a run (or the checkpoint) of training.rllib_ppo
+
+        try:
+            return load_rllib_policy(path)
+        except ValueError as err:
+            raise UnreadableRunError(str(err)) from None
     if path.is_dir() and (path / "policy.pt").is_file():  # a run of training.torchrl_ppo
         from training.torchrl_ppo import load_torch_policy
 
@@ -119,6 +128,41 @@ UNREADABLE = (
     RuntimeError,
     OSError,
 )
+
+
+def evaluate_run(
+    out: Path, policy: Any, cfg: dict[str, Any], frames: int, vessel_steps: int, seconds: float
+) -> dict[str, Any]:
+    """A trained policy and the reference on the same seeds (10 000 +), written to ``out/evaluation.json``.
+
+    The closing evaluation of ``training.torchrl_ppo`` and ``training.rllib_ppo``
+    (the engine of ``baselines.evaluate``): ``cfg`` gives ``scenario``,
+    ``env_kwargs`` and ``eval_episodes``; ``frames``, ``vessel_steps`` and
+    ``seconds`` say how much training the policy had.
+    """
+    import json
+
+    from baselines.engine import episode_reports
+    from baselines.reference import ReferencePolicy
+    from marine_formation_env.atomic import atomic_write_text
+    from marine_formation_env.env import parallel_env
+
+    env = parallel_env(cfg["scenario"], **cfg["env_kwargs"])
+    seeds = [10_000 + k for k in range(cfg["eval_episodes"])]
+    learned, _ = episode_reports(policy, env.config, seeds)
+    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
+    summary = {
+        "seeds": seeds,
+        "frames": frames,
+        "vessel_steps": vessel_steps,
+        "seconds": seconds,
+        "learned_return": float(np.mean([m["return"] for m in learned])),
+        "reference_return": float(np.mean([m["return"] for m in reference])),
+        "learned_success": float(np.mean([m["success"] for m in learned])),
+        "reference_success": float(np.mean([m["success"] for m in reference])),
+    }
+    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
+    return summary
 
 
 class UnreadableRunError(ValueError):

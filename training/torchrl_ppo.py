@@ -47,7 +47,6 @@ import csv
 import inspect
 import io
 import json
-import math
 import pickle
 import time
 from collections.abc import Sequence
@@ -59,7 +58,7 @@ import yaml
 
 from marine_formation_env.atomic import atomic_write_bytes, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
-from training.config import TrainConfigError, _is_number, _whole, apply_overrides, load_config
+from training.config import TrainConfigError, _hidden, _number, _positive, _whole, apply_overrides, load_config
 
 __all__ = ["DEFAULTS", "TorchPolicy", "load_torch_policy", "make_collector", "resolve", "train"]
 
@@ -112,10 +111,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(f"entropy_coef must be ≥ 0, got {cfg['entropy_coef']!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
-    hidden = cfg["hidden"]
-    if not isinstance(hidden, list) or not hidden or not all(_is_whole(h) and h >= 1 for h in hidden):
-        raise TrainConfigError(f"hidden must be a non-empty list of whole numbers ≥ 1, got {hidden!r}")
-    cfg["hidden"] = [int(h) for h in hidden]
+    cfg["hidden"] = _hidden(cfg["hidden"])
     if cfg["frames_per_batch"] % cfg["num_envs"]:
         raise TrainConfigError(
             f"frames_per_batch = {cfg['frames_per_batch']} must be a multiple of num_envs = {cfg['num_envs']}"
@@ -131,23 +127,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
     return cfg
-
-
-def _is_whole(value: Any) -> bool:
-    return _is_number(value) and math.isfinite(value) and float(value).is_integer()
-
-
-def _number(key: str, value: Any) -> float:
-    if not _is_number(value) or not math.isfinite(value):
-        raise TrainConfigError(f"{key} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _positive(key: str, value: Any) -> float:
-    number = _number(key, value)
-    if number <= 0:
-        raise TrainConfigError(f"{key} must be > 0, got {value!r}")
-    return number
 
 
 # ----------------------------------------------------------------------------- networks
@@ -356,7 +335,11 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     bar.close()
     collector.shutdown()
     _save(out, actor, cfg, obs_dim, action_dim, rows)
-    summary = _evaluate(out, cfg, rows)
+    from training.learned import evaluate_run
+
+    policy, _ = load_torch_policy(out)
+    last = rows[-1] if rows else {"frames": 0, "vessel_steps": 0, "seconds": 0.0}
+    summary = evaluate_run(out, policy, cfg, last["frames"], last["vessel_steps"], last["seconds"])
     env.close()
     return summary
 
@@ -404,31 +387,6 @@ def _save(
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_text(out / "progress.csv", text.getvalue())
-
-
-def _evaluate(out: Path, cfg: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """The saved policy and the reference on the same seeds (the engine of ``baselines.evaluate``)."""
-    from baselines.engine import episode_reports
-    from baselines.reference import ReferencePolicy
-    from marine_formation_env.env import parallel_env
-
-    policy, _ = load_torch_policy(out)
-    env = parallel_env(cfg["scenario"], **cfg["env_kwargs"])
-    seeds = [10_000 + k for k in range(cfg["eval_episodes"])]
-    learned, _ = episode_reports(policy, env.config, seeds)
-    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
-    summary = {
-        "seeds": seeds,
-        "frames": rows[-1]["frames"] if rows else 0,
-        "vessel_steps": rows[-1]["vessel_steps"] if rows else 0,
-        "seconds": rows[-1]["seconds"] if rows else 0.0,
-        "learned_return": float(np.mean([m["return"] for m in learned])),
-        "reference_return": float(np.mean([m["return"] for m in reference])),
-        "learned_success": float(np.mean([m["success"] for m in learned])),
-        "reference_success": float(np.mean([m["success"] for m in reference])),
-    }
-    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
-    return summary
 
 
 # ----------------------------------------------------------------------------- command line

@@ -1,0 +1,105 @@
+"""Ray: the sweep's cells as Ray tasks, RLlib PPO on a two-node cluster, its checkpoint evaluated.
+
+Needs the ``rllib`` extra (``.venv-ecosystem``, see README): skipped elsewhere.
+Every cluster runs in its own network and PID namespaces (``tests/isolated.py``):
+loopback only, bounded in time, gone when the test ends.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("ray.rllib")
+
+from baselines.sweep import main as sweep_main
+from tests.isolated import run_isolated
+from training.config import TrainConfigError, load_config
+from training.rllib_ppo import main as rllib_main
+from training.rllib_ppo import resolve
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL_GRID = ["--loss", "0,0.5", "--latency", "0,2", "--episodes", "2", "--set", "horizon=40", "--quiet"]
+
+
+def test_sweep_on_ray_gives_the_report_of_the_local_run(tmp_path):
+    local = tmp_path / "local"
+    assert sweep_main([*SMALL_GRID, "--out", str(local)]) == 0
+    on_ray = tmp_path / "ray"
+    args = " ".join([*SMALL_GRID, "--out", str(on_ray), "--address", "local"])
+    done = run_isolated(f"$PYTHON -m baselines.sweep {args}", timeout=300, cwd=str(ROOT))
+    assert done.returncode == 0, done.stderr[-3000:]
+    # each cell depends only on its settings and seeds: the same numbers, to the last bit, on this build
+    assert json.loads(on_ray.with_suffix(".json").read_text()) == json.loads(local.with_suffix(".json").read_text())
+    assert on_ray.with_suffix(".md").read_text() == local.with_suffix(".md").read_text()
+    assert on_ray.with_suffix(".png").stat().st_size > 0
+
+
+def test_sweep_without_a_cluster_at_the_address_says_so(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        sweep_main([*SMALL_GRID, "--out", str(tmp_path / "s"), "--address", ""])
+    assert "--address must be HOST:PORT, 'auto' or 'local', got ''" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("num_env_runnerz=2", "unknown key(s) ['num_env_runnerz']"),
+        ("num_env_runners=-1", "num_env_runners must be a whole number ≥ 0, got -1"),
+        ("lambda=1.5", "lambda must lie in [0, 1], got 1.5"),
+        ("env_runner_resources={worker_node: 0}", "env_runner_resources must map resource names to amounts > 0"),
+        ("minibatch_size=100000", "minibatch_size = 100000 vessel-steps exceeds a batch of 4000 × 3"),
+        ("env_kwargs.action_levl=speed", "action_levl"),
+    ],
+)
+def test_bad_rllib_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
+    with pytest.raises(SystemExit):
+        rllib_main(["--set", item, "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "run").exists()
+
+
+def test_resolve_fills_the_defaults_and_the_shipped_config_resolves():
+    raw = load_config(ROOT / "training/configs/rllib/paper_speed_ppo.yaml")
+    cfg = resolve(raw, seed=3)
+    assert cfg["seed"] == 3 and cfg["env_kwargs"]["action_level"] == "speed" and cfg["num_env_runners"] == 2
+    with pytest.raises(TrainConfigError, match="hidden must be a non-empty list"):
+        resolve({"hidden": []}, seed=0)
+
+
+@pytest.mark.slow
+def test_rllib_ppo_on_a_two_node_cluster_places_env_runners_on_the_worker_and_its_checkpoint_evaluates(tmp_path):
+    run = tmp_path / "run"
+    evaluation = tmp_path / "evaluation.json"
+    port = 6391
+    script = f"""
+ip -o addr > {tmp_path}/interfaces.txt
+RAY="$(dirname "$PYTHON")/ray"
+export RAY_AUTH_MODE=token  # every process of the cluster and its drivers presents the token (~/.ray/auth_token)
+"$RAY" start --head --port={port} --num-cpus=1 --include-dashboard=false --disable-usage-stats
+"$RAY" start --address=127.0.0.1:{port} --num-cpus=2 --resources='{{"worker_node": 2}}' --disable-usage-stats
+trap '"$RAY" stop --force' EXIT
+$PYTHON -m training.rllib_ppo --config training/configs/rllib/paper_speed_ppo.yaml --address 127.0.0.1:{port} \\
+    --set iterations=2 --set train_batch_size=800 --set minibatch_size=600 --set eval_episodes=1 \\
+    --set env_runner_resources.worker_node=1 --out {run} --no-progress
+$PYTHON -m baselines.evaluate --policy {run} --policy reference --scenario paper --set action_level=speed \\
+    --episodes 1 --json {evaluation} --quiet
+"""
+    done = run_isolated(script, timeout=900, cwd=str(ROOT))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-4000:]
+    interfaces = (tmp_path / "interfaces.txt").read_text().split()
+    assert "lo" in interfaces and "eth0" not in interfaces  # the cluster could only listen on loopback
+    cluster = json.loads((run / "cluster.json").read_text())
+    assert len(cluster["nodes"]) == 2
+    workers = {node for node, info in cluster["nodes"].items() if "worker_node" in info["resources"]}
+    assert len(workers) == 1 and {info["address"] for info in cluster["nodes"].values()} == {"127.0.0.1"}
+    assert len(cluster["env_runners"]) == 2 and set(cluster["env_runners"]) == workers
+    rows = (run / "progress.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[-1].startswith("2,1600,4800,")
+    report = json.loads(evaluation.read_text())
+    learned = report["policies"][str(run)]["summary"]["return"]["mean"]
+    assert math.isfinite(learned) and "reference" in report["policies"]
