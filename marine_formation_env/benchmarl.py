@@ -184,7 +184,7 @@ class MarineFormationTask(Task):
 
 def register() -> None:
     """Put the tasks in BenchMARL's registry (``task=marine_formation/<task>``); repeated calls do nothing."""
-    for task in MarineFormationTask:
+    for task in MarineFormationTask.__members__.values():
         task_config_registry.setdefault(f"{ENV_NAME}/{task.name.lower()}", task)
 
 

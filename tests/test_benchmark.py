@@ -77,3 +77,35 @@ def test_team_size_scaling_reports_vessel_steps_and_the_growth_exponent(monkeypa
     assert out["ideal"]["exponent"] == pytest.approx(2.0) and out["acoustic"]["exponent"] == pytest.approx(2.0)
     real = benchmark.run_case("scaling_acoustic_5", 4, 0.05, 1)
     assert real["vessel_steps_per_s"] == pytest.approx(5 * real["env_steps_per_s"])
+
+
+def test_training_throughput_table_is_relative_to_sb3_and_names_skipped_pipelines() -> None:
+    from benchmarks.training_throughput import format_table
+
+    rows = [
+        {"pipeline": "sb3", "vessel_steps": 1000, "train_seconds": 10.0, "vessel_steps_per_s": 100.0,
+         "learned_return": -120.0, "reference_return": -80.0},
+        {"pipeline": "torchrl", "vessel_steps": 5000, "train_seconds": 10.0, "vessel_steps_per_s": 500.0,
+         "learned_return": -100.0, "reference_return": -80.0},
+        {"pipeline": "rllib", "skipped": "needs --ecosystem-python"},
+    ]  # fmt: skip
+    table = format_table({"pipelines": rows}).splitlines()
+    assert table[2].startswith("| sb3 | 1,000 | 10 | 100 | 1.00 |")
+    assert table[3].startswith("| torchrl | 5,000 | 10 | 500 | 5.00 | -100.0 | -80.0 |")
+    assert table[4] == "| rllib | needs --ecosystem-python | | | | | |"
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--minutes", "0"], "--minutes must be > 0, got 0.0"),
+        (["--pipelines", "sb3,jax"], "--pipelines: unknown ['jax']"),
+        (["--ecosystem-python", "/no/python"], "--ecosystem-python '/no/python' is not an executable"),
+    ],
+)
+def test_training_throughput_refuses_bad_arguments_by_name(capsys, args, message) -> None:
+    from benchmarks.training_throughput import main
+
+    with pytest.raises(SystemExit):
+        main(args)
+    assert message in capsys.readouterr().err

@@ -147,3 +147,31 @@ def test_benchmarl_command_line_runs_a_marine_formation_task(tmp_path):
     assert "Task: marine_formation/acoustic_speed" in done.stdout
     assert "scenario: acoustic" in done.stdout  # the task config, as BenchMARL printed it
     assert list(tmp_path.glob("mappo_acoustic_speed_mlp_*"))
+
+
+def test_a_benchmarl_policy_acts_in_the_evaluation_engine_as_in_benchmarl(tmp_path):
+    import torch
+    from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+    from baselines.engine import episode_reports
+    from benchmarks.benchmarl_budget import BenchMARLPolicy
+
+    task = _task("paper_speed", horizon=20.0)
+    experiment = Experiment(
+        task=task,
+        algorithm_config=MappoConfig.get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=0,
+        config=_small_experiment_config(tmp_path, evaluation=False),
+    )
+    experiment.run()
+    policy = BenchMARLPolicy(experiment.policy, "vessel", 3, 15, 1)
+    env = task.get_env_fun(num_envs=4, continuous_actions=True, seed=7, device="cpu")()
+    td = env.reset()
+    with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
+        expected = experiment.policy(td.clone())["vessel", "action"].numpy()
+    obs = td["vessel", "observation"].numpy().reshape(12, 15)  # the engine's layout: (B·N, dim)
+    np.testing.assert_allclose(policy.act_batch(obs).reshape(4, 3, 1), expected, rtol=1e-6, atol=1e-7)
+    reports, _ = episode_reports(policy, env.config, [0, 1])
+    assert all(np.isfinite(r["return"]) for r in reports)

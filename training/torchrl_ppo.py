@@ -338,8 +338,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     from training.learned import evaluate_run
 
     policy, _ = load_torch_policy(out)
-    last = rows[-1] if rows else {"frames": 0, "vessel_steps": 0, "seconds": 0.0}
-    summary = evaluate_run(out, policy, cfg, last["frames"], last["vessel_steps"], last["seconds"])
+    last: dict[str, Any] = rows[-1] if rows else {"frames": 0, "vessel_steps": 0, "seconds": 0.0}
+    summary = evaluate_run(out, policy, cfg, int(last["frames"]), int(last["vessel_steps"]), float(last["seconds"]))
     env.close()
     return summary
 
