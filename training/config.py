@@ -386,3 +386,34 @@ def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:
     if policy_kwargs:
         kwargs["policy_kwargs"] = policy_kwargs
     return kwargs
+
+
+def add_run_arguments(parser: Any) -> None:
+    """The options every trainer of a run folder takes: ``--config``, ``--set``, ``--seed``, ``--out``, ...
+
+    Shared by ``training.torchrl_ppo`` and ``training.rllib_ppo``; read them back with :func:`config_from_arguments`.
+    """
+    from marine_formation_env.cli import int_at_least
+
+    parser.add_argument("--config", type=Path, default=None, help="YAML file (a mapping under MarineFormation-v0)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override; dots nest")
+    parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the run (default 0)")
+    parser.add_argument("--out", type=Path, required=True, help="run folder")
+    parser.add_argument("--overwrite", action="store_true", help="replace the run folder's files")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def config_from_arguments(args: Any, resolve: Any, prog: str) -> dict[str, Any]:
+    """The resolved config of :func:`add_run_arguments`' options (the file, then ``--set``, then ``resolve``).
+
+    A bad file, override or value ends the program with one line naming it (``prog: error: ...``).
+    """
+    from marine_formation_env.cli import parse_overrides, report_error
+
+    try:
+        raw = load_config(args.config) if args.config is not None else {}
+        raw = apply_overrides(dict(raw), parse_overrides(args.set, nest=False))
+        resolved: dict[str, Any] = resolve(raw, args.seed)
+    except (TrainConfigError, ValueError, KeyError, OSError) as err:
+        report_error(prog, str(err))
+    return resolved

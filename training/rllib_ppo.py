@@ -61,15 +61,15 @@ import numpy as np
 import yaml
 
 from marine_formation_env.atomic import atomic_write_text
-from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
+from marine_formation_env.cli import ArgumentParser, report_error
 from training.config import (
     TrainConfigError,
     _hidden,
     _number,
     _positive,
     _whole,
-    apply_overrides,
-    load_config,
+    add_run_arguments,
+    config_from_arguments,
 )
 
 __all__ = ["DEFAULTS", "ENV_NAME", "MODULE_ID", "RLlibPolicy", "load_rllib_policy", "make_env", "resolve", "train"]
@@ -370,22 +370,12 @@ def _save_checkpoint(algo: Any, out: Path) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     prog = "python -m training.rllib_ppo"
     parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--config", type=Path, default=None, help="YAML file (a mapping under MarineFormation-v0)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override; dots nest")
-    parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the run (default 0)")
-    parser.add_argument("--out", type=Path, required=True, help="run folder")
+    add_run_arguments(parser)
     parser.add_argument(
         "--address", default=None, help="Ray cluster to join: HOST:PORT or 'auto' (default: a Ray of this process)"
     )
-    parser.add_argument("--overwrite", action="store_true", help="replace the run folder's files")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
-    try:
-        raw = load_config(args.config) if args.config is not None else {}
-        raw = apply_overrides(dict(raw), parse_overrides(args.set, nest=False))
-        cfg = resolve(raw, args.seed)
-    except (TrainConfigError, ValueError, KeyError, OSError) as err:
-        report_error(prog, str(err))
+    cfg = config_from_arguments(args, resolve, prog)
     if (args.out / CHECKPOINT_DIR).exists() and not args.overwrite:
         report_error(prog, f"{args.out} already holds a run ({CHECKPOINT_DIR}/); pass --overwrite to replace it")
     try:
