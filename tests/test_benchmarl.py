@@ -52,6 +52,18 @@ def _small_experiment_config(folder: Path, evaluation: bool) -> ExperimentConfig
     return cfg
 
 
+def _experiment(tmp_path: Path, algorithm, task, evaluation: bool) -> Experiment:
+    """BenchMARL's experiment with its default MLPs, seed 0 and the shrunk config."""
+    return Experiment(
+        task=task,
+        algorithm_config=algorithm.get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=0,
+        config=_small_experiment_config(tmp_path, evaluation=evaluation),
+    )
+
+
 def _task(name: str, horizon: float):
     task = MarineFormationTask[name.upper()].get_from_yaml()
     task.config["overrides"]["horizon"] = horizon
@@ -89,14 +101,7 @@ def test_bad_task_configs_are_refused_by_name():
 
 @pytest.mark.parametrize("algorithm", [IppoConfig, MasacConfig])
 def test_benchmarl_api_trains_ippo_and_masac(tmp_path, algorithm):
-    experiment = Experiment(
-        task=_task("paper_speed", horizon=50.0),
-        algorithm_config=algorithm.get_from_yaml(),
-        model_config=MlpConfig.get_from_yaml(),
-        critic_model_config=MlpConfig.get_from_yaml(),
-        seed=0,
-        config=_small_experiment_config(tmp_path, evaluation=False),
-    )
+    experiment = _experiment(tmp_path, algorithm, _task("paper_speed", horizon=50.0), evaluation=False)
     experiment.run()
     assert experiment.n_iters_performed == 1
     assert experiment.total_frames == 400
@@ -106,14 +111,8 @@ def test_benchmarl_api_trains_mappo_and_records_its_evaluation_video(tmp_path):
     pytest.importorskip("moviepy")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    experiment = Experiment(
-        task=_task("paper_speed", horizon=40.0),  # 80 steps per episode
-        algorithm_config=MappoConfig.get_from_yaml(),
-        model_config=MlpConfig.get_from_yaml(),
-        critic_model_config=MlpConfig.get_from_yaml(),
-        seed=0,
-        config=_small_experiment_config(tmp_path, evaluation=True),
-    )
+    task = _task("paper_speed", horizon=40.0)  # 80 steps per episode
+    experiment = _experiment(tmp_path, MappoConfig, task, evaluation=True)
     experiment.run()
     folder = Path(experiment.folder_name)
     # marl-eval's json: the evaluation returns of both episodes, finite
@@ -157,14 +156,7 @@ def test_a_benchmarl_policy_acts_in_the_evaluation_engine_as_in_benchmarl(tmp_pa
     from benchmarks.benchmarl_budget import BenchMARLPolicy
 
     task = _task("paper_speed", horizon=20.0)
-    experiment = Experiment(
-        task=task,
-        algorithm_config=MappoConfig.get_from_yaml(),
-        model_config=MlpConfig.get_from_yaml(),
-        critic_model_config=MlpConfig.get_from_yaml(),
-        seed=0,
-        config=_small_experiment_config(tmp_path, evaluation=False),
-    )
+    experiment = _experiment(tmp_path, MappoConfig, task, evaluation=False)
     experiment.run()
     policy = BenchMARLPolicy(experiment.policy, "vessel", 3, 15, 1)
     env = task.get_env_fun(num_envs=4, continuous_actions=True, seed=7, device="cpu")()

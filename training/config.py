@@ -282,6 +282,22 @@ def _positive(key: str, value: Any) -> float:
     return number
 
 
+def _fraction(key: str, value: Any) -> float:
+    """``value`` as a float if it is a number in [0, 1] (a discount, a GAE λ), else raise naming ``key``."""
+    number = _number(key, value)
+    if not 0.0 <= number <= 1.0:
+        raise TrainConfigError(f"{key} must lie in [0, 1], got {value!r}")
+    return number
+
+
+def _non_negative(key: str, value: Any) -> float:
+    """``value`` as a float if it is a finite number ≥ 0 (an entropy coefficient), else raise naming ``key``."""
+    number = _number(key, value)
+    if number < 0:
+        raise TrainConfigError(f"{key} must be ≥ 0, got {value!r}")
+    return number
+
+
 def _hidden(value: Any) -> list[int]:
     """Hidden layer sizes: a non-empty list of whole numbers ≥ 1."""
     if not isinstance(value, list) or not value or not all(_is_whole(h) and h >= 1 for h in value):

@@ -64,7 +64,9 @@ from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, report_error
 from training.config import (
     TrainConfigError,
+    _fraction,
     _hidden,
+    _non_negative,
     _number,
     _positive,
     _whole,
@@ -125,13 +127,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     for key in ("lr", "clip_param", "grad_clip"):
         cfg[key] = _positive(key, cfg[key])
     for key in ("gamma", "lambda"):
-        value = _number(key, cfg[key])
-        if not 0.0 <= value <= 1.0:
-            raise TrainConfigError(f"{key} must lie in [0, 1], got {cfg[key]!r}")
-        cfg[key] = value
-    cfg["entropy_coeff"] = _number("entropy_coeff", cfg["entropy_coeff"])
-    if cfg["entropy_coeff"] < 0:
-        raise TrainConfigError(f"entropy_coeff must be ≥ 0, got {cfg['entropy_coeff']!r}")
+        cfg[key] = _fraction(key, cfg[key])
+    cfg["entropy_coeff"] = _non_negative("entropy_coeff", cfg["entropy_coeff"])
     cfg["hidden"] = _hidden(cfg["hidden"])
     resources = cfg["env_runner_resources"]
     if not isinstance(resources, dict) or not all(

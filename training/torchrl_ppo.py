@@ -60,8 +60,9 @@ from marine_formation_env.atomic import atomic_write_bytes, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, report_error
 from training.config import (
     TrainConfigError,
+    _fraction,
     _hidden,
-    _number,
+    _non_negative,
     _positive,
     _whole,
     add_run_arguments,
@@ -110,13 +111,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     for key in ("lr", "max_grad_norm", "clip_epsilon"):
         cfg[key] = _positive(key, cfg[key])
     for key in ("gamma", "lmbda"):
-        value = _number(key, cfg[key])
-        if not 0.0 <= value <= 1.0:
-            raise TrainConfigError(f"{key} must lie in [0, 1], got {cfg[key]!r}")
-        cfg[key] = value
-    cfg["entropy_coef"] = _number("entropy_coef", cfg["entropy_coef"])
-    if cfg["entropy_coef"] < 0:
-        raise TrainConfigError(f"entropy_coef must be ≥ 0, got {cfg['entropy_coef']!r}")
+        cfg[key] = _fraction(key, cfg[key])
+    cfg["entropy_coef"] = _non_negative("entropy_coef", cfg["entropy_coef"])
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
     cfg["hidden"] = _hidden(cfg["hidden"])
