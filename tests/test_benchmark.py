@@ -79,20 +79,76 @@ def test_team_size_scaling_reports_vessel_steps_and_the_growth_exponent(monkeypa
     assert real["vessel_steps_per_s"] == pytest.approx(5 * real["env_steps_per_s"])
 
 
-def test_training_throughput_table_is_relative_to_sb3_and_names_skipped_pipelines() -> None:
-    from benchmarks.training_throughput import format_table
+def _run(pipeline: str, seed: int, rate: float, ret: float) -> dict[str, object]:
+    return {"pipeline": pipeline, "seed": seed, "vessel_steps": int(rate * 10), "train_seconds": 10.0,
+            "vessel_steps_per_s": rate, "learned_return": ret, "reference_return": -80.0}  # fmt: skip
 
-    rows = [
-        {"pipeline": "sb3", "vessel_steps": 1000, "train_seconds": 10.0, "vessel_steps_per_s": 100.0,
-         "learned_return": -120.0, "reference_return": -80.0},
-        {"pipeline": "torchrl", "vessel_steps": 5000, "train_seconds": 10.0, "vessel_steps_per_s": 500.0,
-         "learned_return": -100.0, "reference_return": -80.0},
-        {"pipeline": "rllib", "skipped": "needs --ecosystem-python"},
+
+def test_training_throughput_summarizes_each_pipeline_over_its_seeds_against_sb3() -> None:
+    """Truth: numpy's mean, sample std (ddof 1), min and max of the per-seed values."""
+    from benchmarks.training_throughput import format_runs, format_table, summarize
+
+    runs = [
+        _run("sb3", 0, 100.0, -70.0), _run("torchrl", 0, 600.0, -72.0),
+        _run("sb3", 1, 120.0, -74.0), _run("torchrl", 1, 500.0, -66.0),
+        _run("sb3", 2, 110.0, -72.0), {"pipeline": "torchrl", "seed": 2, "failed": "exit 1; see x.log"},
+        {"pipeline": "rllib", "seed": 0, "skipped": "needs --ecosystem-python"},
     ]  # fmt: skip
-    table = format_table({"pipelines": rows}).splitlines()
-    assert table[2].startswith("| sb3 | 1,000 | 10 | 100 | 1.00 |")
-    assert table[3].startswith("| torchrl | 5,000 | 10 | 500 | 5.00 | -100.0 | -80.0 |")
-    assert table[4] == "| rllib | needs --ecosystem-python | | | | | |"
+    sb3, torchrl, rllib = summarize(runs)
+    for row, rates, returns in [(sb3, [100, 120, 110], [-70, -74, -72]), (torchrl, [600, 500], [-72, -66])]:
+        for key, values in (("vessel_steps_per_s", rates), ("learned_return", returns)):
+            spread = row[key]
+            assert spread["per_seed"] == values
+            assert spread["mean"] == pytest.approx(np.mean(values))
+            assert spread["std"] == pytest.approx(np.std(values, ddof=1))
+            assert (spread["min"], spread["max"]) == (min(values), max(values))
+    assert sb3["seeds"] == [0, 1, 2] and "vs_sb3" not in sb3
+    assert torchrl["seeds"] == [0, 1] and torchrl["failed"] == {"2": "exit 1; see x.log"}
+    assert torchrl["vs_sb3"]["rate_ratio"] == pytest.approx(550 / 110)  # ratio of the means: exactly 5
+    assert torchrl["vs_sb3"]["return_difference"] == pytest.approx(-69 + 72)
+    assert torchrl["vs_sb3"]["target_met"] is True
+    assert rllib == {"pipeline": "rllib", "seeds": [], "skipped": {"0": "needs --ecosystem-python"}}
+    table = format_table({"pipelines": [sb3, torchrl, rllib]}).splitlines()
+    assert table[2] == "| sb3 | 0, 1, 2 | 110 ± 10 (100 – 120) | 1.00 | -72.0 ± 2.0 (-74.0 – -70.0) | -80.0 | – |"
+    assert table[3].startswith("| torchrl | 0, 1 (1 not finished) | 550 ± 71 (500 – 600) | 5.00 | -69.0 ± 4.2 ")
+    assert table[3].endswith("| met |")
+    assert table[4] == "| rllib | seed 0: needs --ecosystem-python | | | | | |"
+    lines = format_runs({"runs": runs}).splitlines()
+    assert lines[2] == "| sb3 | 0 | 1,000 | 10 | 100 | -70.0 | -80.0 |"
+    assert lines[7] == "| torchrl | 2 | exit 1; see x.log | | | | |"
+    slower = summarize([_run("sb3", 0, 100.0, -70.0), _run("torchrl", 0, 499.0, -60.0)])[1]["vs_sb3"]
+    worse = summarize([_run("sb3", 0, 100.0, -70.0), _run("torchrl", 0, 900.0, -70.5)])[1]["vs_sb3"]
+    assert slower["target_met"] is False and worse["target_met"] is False
+
+
+def test_training_throughput_runs_every_seed_and_keeps_each_run_in_the_json(monkeypatch, tmp_path, capsys) -> None:
+    import json
+
+    from benchmarks import training_throughput
+
+    calls = []
+
+    def fake(name, minutes, episodes, seed, out, eco):
+        calls.append((name, seed, out))
+        return _run(name, seed, 100.0 * (1 + seed) * (6 if name == "torchrl" else 1), -70.0 - seed)
+
+    monkeypatch.setattr(training_throughput, "run_pipeline", fake)
+    report_path = tmp_path / "docs" / "tt.json"
+    argv = ["--pipelines", "sb3,torchrl", "--seeds", "3,1", "--out", str(tmp_path / "runs"), "--json", str(report_path)]
+    assert training_throughput.main(argv) == 0
+    three, one = tmp_path / "runs" / "seed_3", tmp_path / "runs" / "seed_1"
+    assert calls == [("sb3", 3, three), ("torchrl", 3, three), ("sb3", 1, one), ("torchrl", 1, one)]
+    report = json.loads(report_path.read_text())
+    assert report == json.loads((tmp_path / "runs" / "training_throughput.json").read_text())
+    assert report["complete"] is True and report["seeds"] == [3, 1] and len(report["runs"]) == 4
+    torchrl = report["pipelines"][1]
+    assert torchrl["vessel_steps_per_s"]["per_seed"] == [2400.0, 1200.0]
+    assert torchrl["vs_sb3"]["rate_ratio"] == pytest.approx(6.0) and torchrl["vs_sb3"]["target_met"] is True
+    assert "| torchrl | 3, 1 |" in capsys.readouterr().out
+    assert not list(tmp_path.rglob("*.tmp*"))  # written atomically: no temporary left behind
+    calls.clear()
+    assert training_throughput.main(["--pipelines", "sb3", "--seed", "4", "--out", str(tmp_path / "one")]) == 0
+    assert calls == [("sb3", 4, tmp_path / "one" / "seed_4")]
 
 
 @pytest.mark.parametrize(
@@ -101,6 +157,10 @@ def test_training_throughput_table_is_relative_to_sb3_and_names_skipped_pipeline
         (["--minutes", "0"], "--minutes must be > 0, got 0.0"),
         (["--pipelines", "sb3,jax"], "--pipelines: unknown ['jax']"),
         (["--ecosystem-python", "/no/python"], "--ecosystem-python '/no/python' is not an executable"),
+        (["--seeds", "0,x"], "--seeds: expected comma-separated whole numbers ≥ 0, got 'x' in '0,x'"),
+        (["--seeds", "0,-1"], "got '-1' in '0,-1'"),
+        (["--seeds", "1,1"], "--seeds: seed 1 given twice in '1,1'"),
+        (["--seed", "0", "--seeds", "1"], "not allowed with argument"),
     ],
 )
 def test_training_throughput_refuses_bad_arguments_by_name(capsys, args, message) -> None:

@@ -22,9 +22,10 @@ pytest.importorskip("torchrl")
 from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
+import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
 from training.config import load_config  # noqa: E402
-from training.torchrl_ppo import load_torch_policy, main, resolve  # noqa: E402
+from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
 TINY = [
     "num_envs=4",
@@ -121,6 +122,9 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("frames_per_batch=100", "frames_per_batch = 100 must be a multiple of num_envs = 64"),
         ("colour=1", "unknown key(s) ['colour']"),
         ("env_kwargs.frameskip=4", "unexpected keyword argument 'frameskip'"),
+        ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
+        ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
+        ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -154,3 +158,84 @@ def test_an_unreadable_policy_file_is_named(tmp_path):
 def test_shipped_torchrl_configs_resolve(path):
     cfg = resolve(load_config(path), seed=0)
     assert cfg["frames_per_batch"] % cfg["num_envs"] == 0
+
+
+def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_was_updated_with():
+    """Truth: numpy's weighted mean and (population) variance of all batches concatenated, plus the module's prior
+    (mean 0, variance 1, weight 1e-4: the two points ±1 with weight 5e-5 each). Float32 buffers: rtol 1e-5."""
+    rng = np.random.default_rng(1)
+    norm = running_norm(4)
+    seen = [np.ones((1, 4)), -np.ones((1, 4))]
+    for rows, shift in [(7, 0.0), (50, 3.0), (1, -2.0), (200, 10.0)]:
+        batch = rng.normal(shift, [1.0, 0.1, 5.0, 30.0], (rows, 3, 4)) + np.array([0.0, 100.0, -7.0, 1.0])
+        norm.update(torch.from_numpy(batch.astype(np.float32)))
+        seen.append(batch.astype(np.float32).reshape(-1, 4))
+    every = np.concatenate(seen).astype(np.float64)
+    weights = np.r_[5e-5, 5e-5, np.ones(len(every) - 2)]
+    mean = np.average(every, axis=0, weights=weights)
+    var = np.average((every - mean) ** 2, axis=0, weights=weights)
+    np.testing.assert_allclose(norm.mean.numpy(), mean, rtol=1e-5)
+    np.testing.assert_allclose(norm.var.numpy(), var, rtol=1e-5)
+    assert float(norm.count) == pytest.approx(weights.sum(), rel=1e-12)
+    x = torch.from_numpy(every[2:7].astype(np.float32))
+    expected = np.clip((every[2:7] - mean) / np.sqrt(var + 1e-8), -10, 10)
+    np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-4)
+    assert norm(torch.full((1, 4), 1e6)).max() == 10.0  # clipped
+
+
+def test_reward_scaler_divides_by_the_std_of_the_discounted_returns_it_has_seen():
+    """Truth: a plain loop over each (formation, vessel) stream, G = γG + r reset after done, carried across two
+    batches; numpy's variance of every G. Float32 rewards: rtol 1e-5."""
+    rng = np.random.default_rng(2)
+    gamma, streams = 0.9, np.zeros((2, 3, 1))
+    scaler = RewardScaler(gamma)
+    returns, batches = [], []
+    for _ in range(2):
+        reward = rng.normal(-1.0, 0.5, (2, 6, 3, 1)).astype(np.float32)
+        done = rng.random((2, 6, 1)) < 0.25
+        for b in range(2):
+            for t in range(6):
+                streams[b] = gamma * streams[b] + reward[b, t]
+                returns.append(streams[b].copy())
+                if done[b, t, 0]:
+                    streams[b] = 0.0
+        batches.append((reward, scaler(torch.from_numpy(reward), torch.from_numpy(done))))
+    std = np.sqrt(np.concatenate(returns).var() + 1e-8)
+    reward, scaled = batches[-1]  # the last batch is scaled with the statistics of both
+    np.testing.assert_allclose(scaled.numpy(), np.clip(reward / std, -10, 10), rtol=1e-5)
+
+
+def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_like_the_trained_one(
+    tmp_path, monkeypatch
+):
+    trained = {}
+    save = trainer._save
+
+    def keep(out, actor, *args):
+        trained["actor"] = actor
+        save(out, actor, *args)
+
+    monkeypatch.setattr(trainer, "_save", keep)
+    out = tmp_path / "run"
+    args = ["--seed", "1", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    for item in [*TINY, "normalize_observations=true", "normalize_advantage=true", "normalize_reward=true"]:
+        args += ["--set", item]
+    assert main(args) == 0
+    policy, config = load_torch_policy(out)
+    assert config["normalize_observations"] and config["normalize_reward"]
+    saved, loaded = trained["actor"].module[0].module[0], policy.trunk[0]
+    assert float(saved.count) == pytest.approx(240, abs=1e-3)  # every vessel's observation of the 80 frames
+    for name in ("mean", "var", "count"):
+        torch.testing.assert_close(getattr(loaded, name), getattr(saved, name), rtol=0, atol=0)
+    assert not torch.allclose(saved.mean, torch.zeros_like(saved.mean))
+    obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
+    td = TensorDict({("vessel", "observation"): torch.from_numpy(obs)}, batch_size=[6])
+    with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
+        theirs = trained["actor"](td)["vessel", "action"].numpy()
+    np.testing.assert_allclose(policy.act_batch(obs), theirs, rtol=1e-5, atol=1e-6)
+    from baselines.evaluate import main as evaluate
+
+    report = tmp_path / "report.json"
+    evaluate(["--policy", str(out), "--episodes", "2", "--seed", "10000", "--json", str(report), "--quiet"])
+    mean = json.loads(report.read_text())["policies"][str(out)]["summary"]["return"]["mean"]
+    assert mean == pytest.approx(json.loads((out / "evaluation.json").read_text())["learned_return"], rel=1e-9)

@@ -30,7 +30,18 @@ nest; unknown keys and bad values are refused by name):
 | ``gamma``, ``lmbda`` | discount, GAE λ | 0.99, 0.95 |
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
+| ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
+
+The three normalizations are SB3's (``VecNormalize`` and PPO's advantage
+standardization), done on the learner's side: ``normalize_observations``
+puts a running mean and variance (one per observation entry, pooled over
+every vessel, updated after each batch's epochs, saved with the policy) in
+front of the actor and the critic; ``normalize_advantage`` standardizes the
+advantages of each minibatch; ``normalize_reward`` divides the rewards the
+critic and the advantages see by the running standard deviation of the
+discounted return (clipped to ±10). The env's reward, the logged
+``mean_reward`` and the evaluation are unchanged.
 
 The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 (the policy network's weights and what is needed to rebuild it),
@@ -49,6 +60,7 @@ import io
 import json
 import pickle
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -69,7 +81,16 @@ from training.config import (
     config_from_arguments,
 )
 
-__all__ = ["DEFAULTS", "TorchPolicy", "load_torch_policy", "make_collector", "resolve", "train"]
+__all__ = [
+    "DEFAULTS",
+    "RewardScaler",
+    "TorchPolicy",
+    "load_torch_policy",
+    "make_collector",
+    "resolve",
+    "running_norm",
+    "train",
+]
 
 #: Every key a config may hold, with its default.
 DEFAULTS: dict[str, Any] = {
@@ -89,6 +110,9 @@ DEFAULTS: dict[str, Any] = {
     "entropy_coef": 1e-4,
     "epochs": 4,
     "minibatch_size": 1600,
+    "normalize_observations": False,
+    "normalize_advantage": False,
+    "normalize_reward": False,
     "eval_episodes": 4,
 }
 
@@ -113,6 +137,9 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     for key in ("gamma", "lmbda"):
         cfg[key] = _fraction(key, cfg[key])
     cfg["entropy_coef"] = _non_negative("entropy_coef", cfg["entropy_coef"])
+    for key in ("normalize_observations", "normalize_advantage", "normalize_reward"):
+        if not isinstance(cfg[key], bool):
+            raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
     cfg["hidden"] = _hidden(cfg["hidden"])
@@ -136,14 +163,93 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
 # ----------------------------------------------------------------------------- networks
 
 
-def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[int]) -> Any:
-    """The shared actor: a ``MultiAgentMLP`` (shared parameters) → loc, scale → TanhNormal in [−1, 1]."""
+def running_norm(dim: int) -> Any:
+    """A module ``x ↦ clip((x − mean) / sqrt(var + 1e-8), ±10)`` whose statistics are buffers.
+
+    The statistics are pooled over every leading dimension (formations, time,
+    vessels): one mean and variance per observation entry, the same for every
+    vessel, so the shared weights still take any team size. They change only
+    through :meth:`update` (parallel-variance merge of a batch, as SB3's
+    ``RunningMeanStd``), never in ``forward``: the trainer updates them after
+    the PPO epochs on a batch, so a batch is trained with the statistics it
+    was collected with. They are saved in the module's ``state_dict``.
+    """
+    import torch
+    from torch import nn
+
+    class _RunningNorm(nn.Module):
+        mean: torch.Tensor
+        var: torch.Tensor
+        count: torch.Tensor
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.register_buffer("mean", torch.zeros(dim))
+            self.register_buffer("var", torch.ones(dim))
+            self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
+
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            return ((x - self.mean) / torch.sqrt(self.var + 1e-8)).clamp(-10.0, 10.0)
+
+        @torch.no_grad()
+        def update(self, x: torch.Tensor) -> None:
+            flat = x.reshape(-1, dim).double()
+            n_new = flat.shape[0]
+            mean_new, var_new = flat.mean(0), flat.var(0, unbiased=False)
+            total = self.count + n_new
+            delta = mean_new - self.mean.double()
+            mean = self.mean.double() + delta * (n_new / total)
+            m2 = self.var.double() * self.count + var_new * n_new + delta**2 * (self.count * n_new / total)
+            self.mean.copy_(mean.float())
+            self.var.copy_((m2 / total).float())
+            self.count.copy_(total)
+
+    return _RunningNorm()
+
+
+class RewardScaler:
+    """Learner-side reward scaling, as SB3's ``VecNormalize`` does it (``norm_reward``).
+
+    Each (formation, vessel) stream keeps a discounted return
+    ``G ← γ·G + r`` (reset to 0 after the formation's episode ends, by
+    termination or truncation); the running variance of every ``G`` seen
+    (:func:`running_norm`'s statistics, one entry) scales the rewards:
+    ``r / sqrt(var + 1e-8)`` clipped to ±10. Only what the critic and the
+    advantages see changes; the env's reward does not. The streams carry on
+    across batches because the collector does not reset the formations
+    between batches.
+    """
+
+    def __init__(self, gamma: float) -> None:
+        self.gamma = gamma
+        self.stats = running_norm(1)
+        self.returns: Any = None
+
+    def __call__(self, reward: Any, done: Any) -> Any:
+        """Scaled ``reward`` (``[B, T, n, 1]``); ``done`` is the formation's flag after each step, ``[B, T, 1]``."""
+        import torch
+
+        with torch.no_grad():
+            if self.returns is None:
+                self.returns = torch.zeros_like(reward[:, 0], dtype=torch.float64)
+            seen = torch.empty_like(reward, dtype=torch.float64)
+            for t in range(reward.shape[1]):
+                self.returns = self.gamma * self.returns + reward[:, t]
+                seen[:, t] = self.returns
+                self.returns = self.returns * (~done[:, t]).unsqueeze(-1)
+            self.stats.update(seen)
+            return (reward / torch.sqrt(self.stats.var + 1e-8)).clamp(-10.0, 10.0)
+
+
+def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[int], normalize: bool = False) -> Any:
+    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → TanhNormal."""
     import torch
     from tensordict.nn import NormalParamExtractor, TensorDictModule
     from torch import nn
     from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
 
     net = nn.Sequential(
+        *([running_norm(obs_dim)] if normalize else []),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=2 * action_dim,
@@ -168,19 +274,22 @@ def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[i
     )
 
 
-def _critic_network(obs_dim: int, n_agents: int, hidden: list[int], centralized: bool) -> Any:
+def _critic_network(obs_dim: int, n_agents: int, hidden: list[int], centralized: bool, normalize: bool) -> Any:
     from tensordict.nn import TensorDictModule
     from torch import nn
     from torchrl.modules import MultiAgentMLP
 
-    net = MultiAgentMLP(
-        n_agent_inputs=obs_dim,
-        n_agent_outputs=1,
-        n_agents=n_agents,
-        centralized=centralized,
-        share_params=True,
-        num_cells=hidden,
-        activation_class=nn.Tanh,
+    net = nn.Sequential(
+        *([running_norm(obs_dim)] if normalize else []),
+        MultiAgentMLP(
+            n_agent_inputs=obs_dim,
+            n_agent_outputs=1,
+            n_agents=n_agents,
+            centralized=centralized,
+            share_params=True,
+            num_cells=hidden,
+            activation_class=nn.Tanh,
+        ),
     )
     return TensorDictModule(net, in_keys=[("vessel", "observation")], out_keys=[("vessel", "state_value")])
 
@@ -198,7 +307,7 @@ class TorchPolicy:
 
     def __init__(self, actor: Any, observation_dim: int, action_dim: int) -> None:
         self.actor = actor
-        self.mlp = _shared_mlp(actor)
+        self.trunk = _shared_trunk(actor)
         self.observation_dim = observation_dim
         self.action_dim = action_dim
 
@@ -208,7 +317,7 @@ class TorchPolicy:
         # every vessel is one batch entry of a one-agent MLP (the weights are shared: any team size)
         flat = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, 1, obs.shape[-1]))
         with torch.no_grad():
-            loc, _ = self.mlp(flat).chunk(2, dim=-1)
+            loc, _ = self.trunk(flat).chunk(2, dim=-1)
         return np.asarray(torch.tanh(loc).numpy(), dtype=np.float32).reshape(*obs.shape[:-1], self.action_dim)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -234,7 +343,9 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         saved = torch.load(path, map_location="cpu", weights_only=True)
         dims = saved["dims"]
         # the shared MLP takes any number of agents: build it for one, each vessel is a batch entry
-        actor = _policy_network(int(dims["observation"]), int(dims["action"]), 1, [int(h) for h in saved["hidden"]])
+        hidden = [int(h) for h in saved["hidden"]]
+        normalize = bool(saved.get("normalize_observations", False))
+        actor = _policy_network(int(dims["observation"]), int(dims["action"]), 1, hidden, normalize)
         actor.load_state_dict(saved["actor"])
         config = json.loads(saved["config"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
@@ -242,14 +353,16 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
     return TorchPolicy(actor, int(dims["observation"]), int(dims["action"])), config
 
 
-def _shared_mlp(actor: Any) -> Any:
-    """The ``MultiAgentMLP`` of an actor built by :func:`_policy_network` (its loc, scale network's first layer)."""
+def _shared_trunk(actor: Any) -> Any:
+    """The observation → (loc, scale) network of an actor built by :func:`_policy_network`: its running norm
+    (if any) and its ``MultiAgentMLP``, without the ``NormalParamExtractor``."""
     from torchrl.modules import MultiAgentMLP
 
-    mlp = actor.module[0].module[0]
+    net = actor.module[0].module
+    mlp = net[-2]
     if not isinstance(mlp, MultiAgentMLP):
         raise ValueError(f"not an actor of training.torchrl_ppo: found {type(mlp).__name__} where its MLP should be")
-    return mlp
+    return net[:-1]
 
 
 # ----------------------------------------------------------------------------- training
@@ -271,8 +384,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **cfg["env_kwargs"])
     env.set_seed(seed)
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"])
-    critic = _critic_network(obs_dim, n, cfg["hidden"], centralized=cfg["algo"] == "mappo")
+    normalize = cfg["normalize_observations"]
+    scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize)
+    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
@@ -284,8 +399,11 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         critic_network=critic,
         clip_epsilon=cfg["clip_epsilon"],
         entropy_coeff=cfg["entropy_coef"],
-        normalize_advantage=False,
+        normalize_advantage=cfg["normalize_advantage"],
     )
+    # one shared policy: its advantages are standardized over every vessel together (TorchRL warns that
+    # this pools the agent dimension, which is what a shared policy wants)
+    warnings.filterwarnings("ignore", message="You requested advantage normalization", category=UserWarning)
     loss.set_keys(
         reward=("vessel", "reward"),
         action=("vessel", "action"),
@@ -304,6 +422,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     frames = 0
     bar = _progress(cfg["total_frames"], progress)
     for data in collector:
+        raw_reward = data.get(("next", "vessel", "reward"))
+        mean_reward = float(raw_reward.mean())  # logged as the env gave it, before any scaling
+        if scaler is not None:
+            data.set(("next", "vessel", "reward"), scaler(raw_reward, data.get(("next", "done"))))
         # the formation's done flags for every vessel, as the loss reads them per agent
         for key in ("done", "terminated"):
             flag = data.get(("next", key))
@@ -321,6 +443,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 total.backward()
                 torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
                 optim.step()
+        if normalize:  # after the epochs: each batch trains with the statistics it was collected with
+            for net in (actor.module[0].module, critic.module):
+                net[0].update(data.get(("vessel", "observation")))
         collector.update_policy_weights_()
         frames += data.numel()
         elapsed = time.perf_counter() - begin
@@ -329,7 +454,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "frames": frames,
                 "vessel_steps": frames * n,
                 "seconds": round(elapsed, 3),
-                "mean_reward": float(data.get(("next", "vessel", "reward")).mean()),
+                "mean_reward": mean_reward,
             }
         )
         bar.update(data.numel())
@@ -381,6 +506,7 @@ def _save(
             "actor": actor.state_dict(),
             "dims": {"observation": obs_dim, "action": action_dim},
             "hidden": cfg["hidden"],
+            "normalize_observations": cfg["normalize_observations"],
             "config": json.dumps(cfg),
         },
         buffer,
