@@ -6,9 +6,13 @@ observation only (never the global state):
 * the coordination law (20): ``s_j = Σ_{i∈A_j} (θ_j − θ_i)`` from the link
   bits and relative coordination errors in the slots, ``u_cj = u_d − g(s_j)``
   and, for the force level, ``u̇_cj = u̇_d − g'(s_j)·Σ_{i∈A_j}(ẋ_j − ẋ_i)``;
+  on a curved path (docs/paths.md) ``θ = ℓ − D_x``, ``ẋ`` is ``ℓ̇``, and
+  ``u_cj`` is the lane's surge command ``(1 − κ·D_yj)·(u_d − g(s_j))`` with κ
+  and D_yj from the observation;
 * at ``speed``: the action that commands ``u_cj`` (the env's LOS path
   follower does the rest);
-* at ``guidance``: ``(u_cj, ψ_LOS,j)`` with ψ_LOS from (12);
+* at ``guidance``: ``(u_cj, ψ_LOS,j)`` with ψ_LOS from (12) (on a curved path
+  relative to the path, ``−atan(e/Δ)``, as the level's heading command is);
 * at ``force``: the full surge (11) and yaw (12)-(14) laws, docs/model.md §3
   corrected (or as printed when the env has ``paper_as_printed=True``), held
   over the control period.
@@ -48,7 +52,15 @@ import numpy as np
 
 from baselines.rollout import BatchPolicy
 from marine_formation_env.actions import normalized_actions
-from marine_formation_env.control import consensus_speed, integral_los_rate, los_angle, path_following_inputs
+from marine_formation_env.control import (
+    consensus_speed,
+    curved_path_following_inputs,
+    integral_los_rate,
+    lane_speed,
+    los_angle,
+    path_following_inputs,
+    turn_crab,
+)
 from marine_formation_env.observations import ObservationLayout
 from marine_formation_env.scenarios import ScenarioConfig
 
@@ -126,17 +138,29 @@ class ReferencePolicy(BatchPolicy):
         if obs.shape[-1:] != (self.layout.dim,):
             raise ValueError(f"observations must end in dimension {self.layout.dim}, got shape {obs.shape}")
         own, slots = self.layout.split(obs)
-        e, psi, u, v, r, u_d, u_d_dot = (own[..., k] for k in range(7))
+        # psi is the heading relative to the path (the heading itself on the straight path)
+        e, psi, u, v, r, u_d, u_d_dot, kappa, _, d_y = (own[..., k] for k in range(10))
         linked, d_theta, d_xdot, age = (slots[..., k] for k in range(4))
+        metric = 1.0 - kappa * (d_y + e)  # 1 − κ·d: 1 on the straight path
         if self.extrapolate:
-            x_dot_own = u * np.cos(psi) - v * np.sin(psi)
+            x_dot_own = (u * np.cos(psi) - v * np.sin(psi)) / metric
             d_theta = d_theta - (x_dot_own[..., None] - d_xdot) * age
         s = np.sum(linked * d_theta, axis=-1)
         s_dot = np.sum(linked * d_xdot, axis=-1)
-        u_c, u_c_dot = consensus_speed(s, s_dot, u_d, u_d_dot, cfg.gains.a)
+        # (20) gives the projection's speed w; the lane's factor 1 − κ·D_y turns it into a surge command
+        w, w_dot = consensus_speed(s, s_dot, u_d, u_d_dot, cfg.gains.a)
+        u_c, u_c_dot = lane_speed(cfg.params, w, w_dot, kappa, d_y)
         out = {"u_c": u_c, "u_c_dot": u_c_dot}
-        if cfg.action_level == "guidance":
+        if cfg.action_level == "guidance" and not cfg.straight:  # relative to the path, crab included
+            ell_dot = (u * np.cos(psi) - v * np.sin(psi)) / metric
+            crab = turn_crab(cfg.params, kappa, u, 0.0, ell_dot, 0.0)[0]
+            out["psi_d"] = los_angle(self._steering_error(e, advance), cfg.gains.delta) - crab
+        elif cfg.action_level == "guidance":
             out["psi_d"] = los_angle(self._steering_error(e, advance), cfg.gains.delta)
+        elif cfg.action_level == "force" and not cfg.straight:
+            out["tau_u"], out["tau_r"] = curved_path_following_inputs(
+                cfg.params, cfg.gains, self._steering_error(e, advance), psi, kappa, metric, u, v, r, u_c, u_c_dot
+            )
         elif cfg.action_level == "force":
             out["tau_u"], out["tau_r"] = path_following_inputs(
                 cfg.params,

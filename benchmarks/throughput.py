@@ -329,7 +329,7 @@ def count_vessel_step_ops(level: str = "force") -> dict[str, Any]:
     from marine_formation_env.scenarios import make_config
 
     core = FormationCore(make_config("paper", action_level=level), num_envs=1)
-    core.reset(core.config.initial_state)
+    core.reset(core.config.start_state)
     commands = physical_commands(core.config, np.zeros((1, 3, core.action_dim)))
     rhs = core.closed_loop(commands)
     state: np.ndarray = core.state.view(_Counter)

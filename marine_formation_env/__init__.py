@@ -34,7 +34,7 @@ from marine_formation_env.scenarios import (
 
 __version__ = "0.3.0.dev0"
 
-ENV_ID = "MarineFormation-v0"
+ENV_ID = "MarineFormation-v1"
 
 
 def _register() -> None:

@@ -273,7 +273,8 @@ def _kernel(  # type: ignore[no-untyped-def]
             e_j = state[b, j, 1] - offsets[j, 1]
             theta_j, xdot_j = theta[b, j], xdot[b, j]
             psi_w = wrap_angle(state[b, j, 2])
-            own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b])
+            # the straight path: no curvature now or ahead; the lane offset D_y
+            own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b], 0.0, 0.0, offsets[j, 1])
             for f in range(OWN_SIZE if not (channel_on and has_noise) else 0):  # else: from the measurement
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
             for kk in range(n - 1 if not channel_on else 0):
@@ -619,6 +620,9 @@ def _channel_observe(  # type: ignore[no-untyped-def]
                 measured[b, j, 5],
                 u_d[b],
                 u_d_rate[b],
+                0.0,
+                0.0,
+                offsets[j, 1],
             )
             for f in range(OWN_SIZE):
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])

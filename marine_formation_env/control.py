@@ -32,15 +32,21 @@ Accelerations = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 __all__ = [
     "consensus_speed",
+    "curved_heading_inputs",
+    "curved_path_following_inputs",
     "heading_tracking_inputs",
     "heading_yaw_reference",
     "integral_los_rate",
+    "lane_speed",
     "los_angle",
     "los_yaw_reference",
     "path_following_inputs",
+    "path_rates",
     "saturation",
     "saturation_slope",
     "surge_law",
+    "turn_crab",
+    "turn_sway",
     "yaw_law",
 ]
 
@@ -254,4 +260,177 @@ def heading_tracking_inputs(
     """
     tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u, as_printed)
     r_d, r_d_dot = heading_yaw_reference(psi, r, psi_d, gains.k_psi)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)
+
+
+# ----------------------------------------------------------------------------- curved paths (docs/paths.md)
+# Our generalization of (11)-(14) and (20) to a path P(ℓ) of curvature κ(ℓ), not the paper's. Every
+# function below takes the vessel's path coordinates: the cross-track error e [m], the heading relative
+# to the path β = ψ − γ(ℓ) [rad], the curvature κ [1/m] at its projection and the metric factor
+# 1 − κ·d [-] (d = D_y + e its offset from the path), besides its velocities. κ is piecewise constant
+# (lines and arcs): its derivative is zero except at the joints, where the feed-forward steps.
+
+
+def turn_sway(p: VesselParams, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``q(u) = −X(u)/Y(u)`` [m] and ``q'(u)``: the sway of steady turning is ``v = q(u)·r`` (``v̇ = 0`` in (3)).
+
+    X and Y are affine in u (docs/model.md §1), so ``q' = −(X'·Y − X·Y')/Y²``.
+    """
+    x, y = p.sway_coupling(u), p.sway_damping(u)
+    x_slope = p.sway_coupling(1.0) - p.sway_coupling(0.0)
+    y_slope = p.sway_damping(1.0) - p.sway_damping(0.0)
+    return -x / y, -(x_slope * y - x * y_slope) / (y * y)  # type: ignore[operator,return-value]
+
+
+def lane_speed(
+    p: VesselParams, w: np.ndarray, w_dot: np.ndarray | float, kappa: np.ndarray, d_y: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Surge command that moves a vessel's projection at ``w`` along its lane, and its rate.
+
+    In steady turning on lane ``D_y`` (``e = 0``) at projection speed ``w``,
+    the vessel turns at ``r = κ·w`` and moves along its lane at
+    ``U = (1 − κ·D_y)·w`` (faster on the outer lane), with the sway
+    ``v = q(u)·r`` of :func:`turn_sway`; so its surge speed solves
+    ``u² + (q(u)·κ·w)² = U²``. Three fixed-point steps
+    ``u ← U − v²/(U + √(U² − v²))`` solve it (``q`` varies slowly with u).
+    The rate follows from differentiating that relation with κ constant
+    between joints: ``u̇ = (U·U̇ − q²·Ω·Ω̇)/(u + q·q'·Ω²)`` with ``Ω = κ·w``.
+    On a straight part (κ = 0) this is ``u_c = w``, ``u̇_c = ẇ`` exactly.
+    """
+    factor = 1.0 - kappa * d_y
+    lane, lane_dot = factor * w, factor * w_dot
+    omega, omega_dot = kappa * w, kappa * w_dot
+    u = lane
+    for _ in range(3):
+        sway = turn_sway(p, u)[0] * omega
+        u = lane - sway * sway / (lane + np.sqrt(np.maximum(lane * lane - sway * sway, 0.0)))
+    q, q_slope = turn_sway(p, u)
+    den = u + q * q_slope * omega * omega
+    return u, lane_dot * (lane / den) - q * q * omega * omega_dot / den
+
+
+def path_rates(
+    beta: np.ndarray,
+    kappa: np.ndarray,
+    metric: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_dot: np.ndarray,
+    v_dot: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(ℓ̇, ℓ̈, ė, ë)`` of a vessel in path coordinates (docs/paths.md, "Kinematics").
+
+    ::
+
+        ℓ̇ = (u cos β − v sin β)/(1 − κ·d)        ė = u sin β + v cos β
+        β̇ = r − κ·ℓ̇
+        ℓ̈ = (u̇ cos β − v̇ sin β − β̇·ė + κ·ė·ℓ̇)/(1 − κ·d)
+        ë = u̇ sin β + u·β̇ cos β + v̇ cos β − v·β̇ sin β
+    """
+    cb, sb = np.cos(beta), np.sin(beta)
+    ell_dot = (u * cb - v * sb) / metric
+    e_dot = u * sb + v * cb
+    beta_dot = r - kappa * ell_dot
+    ell_ddot = (u_dot * cb - v_dot * sb - beta_dot * e_dot + kappa * e_dot * ell_dot) / metric
+    e_ddot = u_dot * sb + u * beta_dot * cb + v_dot * cb - v * beta_dot * sb
+    return ell_dot, ell_ddot, e_dot, e_ddot
+
+
+def curved_path_following_inputs(
+    p: VesselParams,
+    gains: Gains,
+    e: np.ndarray,
+    beta: np.ndarray,
+    kappa: np.ndarray,
+    metric: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_c: np.ndarray,
+    u_c_dot: np.ndarray | float,
+    acc: Accelerations | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Surge (11) and LOS (12)-(14) on a curved path, with (13): ``(τ_u, τ_r)`` [m/s², rad/s²].
+
+    ``ψ_LOS = γ(ℓ) − atan(e/Δ)``, so ``ψ − ψ_LOS = β + atan(e/Δ)`` and::
+
+        ψ̇_LOS = κ·ℓ̇ − Δ·ė/(e² + Δ²)
+        ψ̈_LOS = κ·ℓ̈ − Δ·ë/(e² + Δ²) + 2·Δ·e·ė²/(e² + Δ²)²      (κ' = 0 between joints)
+        r_d = ψ̇_LOS − k_ψ·(ψ − ψ_LOS),   ṙ_d = ψ̈_LOS − k_ψ·(r − ψ̇_LOS)
+
+    and ψ_LOS is further corrected by the crab angle of steady turning
+    (:func:`turn_crab`), whose rate enters ψ̇_LOS; its second derivative
+    (which would need v̈, hence ṙ) is left out of ψ̈_LOS: it vanishes in steady
+    turning and on straight parts, and only the transients feel it. With
+    ``κ = 0`` these are (12)-(14) of the straight path (docs/model.md §3).
+    ``e`` is the error LOS steers on (with integral LOS, ``e + σ·e_int``);
+    ``metric`` is ``1 − κ·d`` with the vessel's true offset ``d``.
+    """
+    acc = accelerations(p, u, v, r) if acc is None else acc
+    a_u, v_dot, _ = acc
+    tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u)
+    u_dot = a_u + tau_u
+    ell_dot, ell_ddot, e_dot, e_ddot = path_rates(beta, kappa, metric, u, v, r, u_dot, v_dot)
+    crab, crab_dot = turn_crab(p, kappa, u, u_dot, ell_dot, ell_ddot)
+    delta = gains.delta
+    den = e * e + delta * delta
+    psi_los_dot = kappa * ell_dot - delta * e_dot / den - crab_dot
+    psi_los_ddot = kappa * ell_ddot - delta * e_ddot / den + 2.0 * delta * e * e_dot * e_dot / (den * den)
+    r_d = psi_los_dot - gains.k_psi * wrap_angle(beta + np.arctan(e / delta) + crab)
+    r_d_dot = psi_los_ddot - gains.k_psi * (r - psi_los_dot)
+    return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)
+
+
+def turn_crab(
+    p: VesselParams,
+    kappa: np.ndarray,
+    u: np.ndarray,
+    u_dot: np.ndarray | float,
+    ell_dot: np.ndarray,
+    ell_ddot: np.ndarray | float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The crab angle of steady turning at the path's rate, ``atan(q(u)·κ·ℓ̇/u)`` [rad], and its rate.
+
+    A vessel turning with the path (``r = κ·ℓ̇``) sways at ``v = q(u)·r``
+    (:func:`turn_sway`), so its velocity points ``atan(v/u)`` off its heading;
+    LOS on a curved path adds minus this angle to ψ_LOS, or it would settle
+    ``Δ·v/u`` off the lane (docs/paths.md, "LOS on a curved path"). Zero on
+    straight parts. ``u`` below 0.5 m/s is taken as 0.5 m/s.
+    """
+    speed = np.maximum(u, 0.5)
+    q, q_slope = turn_sway(p, speed)
+    ratio = q * kappa * ell_dot / speed
+    ratio_dot = kappa * ((q_slope * u_dot * ell_dot + q * ell_ddot) - q * ell_dot * u_dot / speed) / speed
+    return np.arctan(ratio), ratio_dot / (1.0 + ratio * ratio)
+
+
+def curved_heading_inputs(
+    p: VesselParams,
+    gains: Gains,
+    beta_d: np.ndarray,
+    beta: np.ndarray,
+    kappa: np.ndarray,
+    metric: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    r: np.ndarray,
+    u_c: np.ndarray,
+    u_c_dot: np.ndarray | float,
+    acc: Accelerations | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ``guidance`` level's loops on a curved path: surge (11) and a heading ``β_d`` relative to the path.
+
+    The desired heading ``ψ_d = γ(ℓ) + β_d`` turns with the path
+    (``ψ̇_d = κ·ℓ̇``), so ``r_d = κ·ℓ̇ − k_ψ·(β − β_d)`` and
+    ``ṙ_d = κ·ℓ̈ − k_ψ·(r − κ·ℓ̇)``; with ``κ = 0`` this is
+    :func:`heading_tracking_inputs` with a held ψ_d.
+    """
+    acc = accelerations(p, u, v, r) if acc is None else acc
+    a_u, v_dot, _ = acc
+    tau_u = surge_law(p, u, v, r, u_c, u_c_dot, gains.k_u)
+    ell_dot, ell_ddot, _, _ = path_rates(beta, kappa, metric, u, v, r, a_u + tau_u, v_dot)
+    turn = kappa * ell_dot
+    r_d = turn - gains.k_psi * wrap_angle(beta - beta_d)
+    r_d_dot = kappa * ell_ddot - gains.k_psi * (r - turn)
     return tau_u, yaw_law(p, u, v, r, r_d, r_d_dot, gains.k_r, acc)

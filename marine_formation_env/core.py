@@ -20,19 +20,30 @@ generator the caller passes in: the core holds none), the channel
 (:mod:`~marine_formation_env.disturbances`). Every front end (PettingZoo env,
 gymnasium views, vector env) is a thin view of this class.
 
-Observation of vessel ``j`` (float32, ``7 + 4·(N−1)`` entries, docs/model.md §7)::
+Observation of vessel ``j`` (float32, ``10 + 4·(N−1)`` entries, docs/model.md §7;
+on a curved path in the path coordinates of docs/paths.md, which on the
+paper's straight path are the quantities named first)::
 
-    own   0 e_j = y_j − D_yj                 [m]
-          1 ψ_j wrapped to [−π, π)           [rad]
+    own   0 e_j = y_j − D_yj                 [m]     (curved: (p_j − P(ℓ_j))·n − D_yj)
+          1 ψ_j wrapped to [−π, π)           [rad]   (curved: β_j = ψ_j − γ(ℓ_j), wrapped)
           2 u_j   3 v_j                      [m/s]
           4 r_j                              [rad/s]
           5 u_d(t)                           [m/s]
           6 u̇_d(t)                           [m/s²]
+          7 κ(ℓ_j): the path's curvature     [1/m]   (0 on the straight path)
+          8 κ(ℓ_j + 100 m), ahead            [1/m]
+          9 D_yj, the vessel's lane offset   [m]
     slot k = 0…N−2 holds vessel i = (j + k + 1) mod N:
           0 link bit: 1 iff i ∈ A_j (i transmits to j)
-          1 (x_j − D_xj) − (x_i − D_xi)      [m]     (0 if no link)
-          2 ẋ_j − ẋ_i                        [m/s]   (0 if no link)
+          1 θ_j − θ_i, θ = x − D_x           [m]     (curved: θ = ℓ − D_x; 0 if no link)
+          2 ẋ_j − ẋ_i                        [m/s]   (curved: ℓ̇_j − ℓ̇_i; 0 if no link)
           3 age of that data                 [s]     (0: ideal links)
+
+On a curved path (``not config.straight``) the core also follows each
+vessel's projection ``ℓ_j`` on the path (:attr:`FormationCore.arc`),
+continuously: a global search at reset, then Newton steps from the previous
+value after every RK4 step. The compiled kernel covers the straight path;
+curved paths run the numpy step.
 
 With a non-ideal channel, switching topologies or sensor noise
 (``not config.ideal_observations``), a :class:`~marine_formation_env.channel.LinkChannel`
@@ -55,7 +66,13 @@ import numpy as np
 from marine_formation_env.actions import map_actions
 from marine_formation_env.backends import resolve_backend
 from marine_formation_env.channel import LinkChannel
-from marine_formation_env.control import heading_tracking_inputs, integral_los_rate, path_following_inputs
+from marine_formation_env.control import (
+    curved_heading_inputs,
+    curved_path_following_inputs,
+    heading_tracking_inputs,
+    integral_los_rate,
+    path_following_inputs,
+)
 from marine_formation_env.disturbances import SensorNoiseSource
 from marine_formation_env.dynamics import (
     PSI,
@@ -72,9 +89,14 @@ from marine_formation_env.dynamics import (
 )
 from marine_formation_env.errors import checked_array, float_array
 from marine_formation_env.observations import ObservationLayout, observation_bounds
+from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.rules import (
     COORDINATION,
+    CURVATURE,
+    CURVATURE_AHEAD,
+    LANE_OFFSET,
     LINK,
+    LOOKAHEAD,
     VELOCITY,
     along_track,
     cost_term,
@@ -175,6 +197,9 @@ class FormationCore:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer ≥ 1, got {num_envs!r}")
         self.backend = resolve_backend(backend)
+        self._curved = not config.straight
+        if self._curved:
+            self.backend = "numpy"  # the compiled kernel covers the paper's straight path (module docstring)
         self.config = config
         self.num_envs = int(num_envs)
         self.n = config.n_vessels
@@ -191,6 +216,8 @@ class FormationCore:
         self.time = np.zeros(self.num_envs)
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
+        self.arc = np.zeros((self.num_envs, n))  # ℓ_j: each vessel's projection on a curved path [m]
+        self._arc_guess = self.arc  # where the projections of an RK4 step's stages start from
         self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
         self._current: tuple[float, float, float, float, float] | None = (
             None if config.current.is_zero else config.current.coefficients
@@ -274,6 +301,8 @@ class FormationCore:
         self.state[ids] = arr
         self.time[ids] = 0.0
         self.steps[ids] = 0
+        if self._curved:
+            self.arc[ids] = self.config.path.closest(self.state[ids][..., X], self.state[ids][..., Y])
         self._fresh[ids] = True  # the first command after a reset is held, not ramped
         self.los_integral[ids] = 0.0
         index = np.arange(self.num_envs)[ids]
@@ -290,7 +319,7 @@ class FormationCore:
                 self._measured = self.state.copy()
             self._measured[ids] = self.state[ids] + self.sensor_noise.draw(ids)
         s, time = self.measured[ids], self.time[ids]
-        theta, x_dot = self._along_track(s, time, inertial=True)
+        theta, x_dot = self._along_track(s, time, inertial=True, ids=ids)
         self.channel.update(ids, self.steps[ids], time, theta, x_dot, self.state[ids][..., :2])
 
     # ------------------------------------------------------------------- step
@@ -337,7 +366,7 @@ class FormationCore:
             if "u_c" in commands:
                 self._last_u_c[fresh] = commands["u_c"][fresh]
             self._fresh[:] = False
-        e_start = self.state[..., Y] - self._dy if self._los_sigma > 0 else None
+        e_start = self._cross_track(self.state) if self._los_sigma > 0 else None
         if self._kernel is not None:
             out = self._step_compiled(clipped, commands, restart_ids, initial)
         else:
@@ -346,6 +375,9 @@ class FormationCore:
             state = self.state
             for k in range(cfg.substeps):
                 state = rk4_step(rhs, state, h, k * h)
+                if self._curved:  # follow the projections: Newton from where they were
+                    self.arc = cfg.path.project(state[..., X], state[..., Y], self.arc)
+                    self._arc_guess = self.arc
             self.state = state
             self.time = self.time + cfg.dt
             self.steps = self.steps + 1
@@ -391,6 +423,8 @@ class FormationCore:
         self.state[ids] = initial
         self.time[ids] = 0.0
         self.steps[ids] = 0
+        if self._curved:
+            self.arc[ids] = self.config.path.closest(initial[..., X], initial[..., Y])
         if self.channel is not None:
             self.channel.reset(ids)
 
@@ -455,6 +489,8 @@ class FormationCore:
         cfg = self.config
         p, gains, printed = cfg.params, cfg.gains, cfg.paper_as_printed
         sea = self._current_at(self.time)
+        if self._curved and cfg.action_level != "force":
+            return self._closed_loop_curved(commands, sea)
         if cfg.action_level == "force":
             tau_u, tau_r = commands["tau_u"], commands["tau_r"]
             return lambda t, s: vessel_rhs(p, s, tau_u, tau_r, None, sea(t))
@@ -485,7 +521,59 @@ class FormationCore:
 
         return rhs_speed
 
+    def _closed_loop_curved(
+        self, commands: dict[str, np.ndarray], sea: Callable[[float], tuple[Any, Any] | None]
+    ) -> Callable[[float, np.ndarray], np.ndarray]:
+        """:meth:`closed_loop` on a curved path (``speed``, ``guidance``): the loops of docs/paths.md.
+
+        At every RK4 stage the vessels' path coordinates are computed from the
+        stage's state, projecting from the step's start (``_arc_guess``). At
+        ``guidance`` the heading command is relative to the path, ``ψ_d = γ(ℓ) + β_d``.
+        """
+        cfg = self.config
+        p, gains, path = cfg.params, cfg.gains, cfg.path
+        clip, tu_max, tr_max = np.clip, cfg.tau_u_max, cfg.tau_r_max
+        u_c0 = self._last_u_c
+        u_c_dot = (commands["u_c"] - u_c0) / cfg.dt
+        beta_d = commands.get("psi_d")
+        steer_dy = self._steer_dy()
+
+        def rhs_curved(t: float, s: np.ndarray) -> np.ndarray:
+            psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
+            c = path_coordinates(path, s[..., X], s[..., Y], psi, u, v, self._arc_guess)
+            acc = accelerations(p, u, v, r)
+            u_c = u_c0 + u_c_dot * t
+            if beta_d is None:  # speed: LOS on the error it steers on (D_y shifted by integral LOS)
+                tau_u, tau_r = curved_path_following_inputs(
+                    p, gains, c.offset - steer_dy, c.beta, c.kappa, c.metric, u, v, r, u_c, u_c_dot, acc
+                )
+            else:
+                tau_u, tau_r = curved_heading_inputs(
+                    p, gains, beta_d, c.beta, c.kappa, c.metric, u, v, r, u_c, u_c_dot, acc
+                )
+            return vessel_rhs(p, s, clip(tau_u, -tu_max, tu_max), clip(tau_r, -tr_max, tr_max), acc, sea(t))
+
+        return rhs_curved
+
     # ------------------------------------------------------------ observation
+    def _coordinates(self, s: np.ndarray, guess: np.ndarray, time: np.ndarray | None = None) -> PathCoordinates:
+        """Path coordinates of states ``s`` ``(b, N, 6)`` on a curved path, projecting from ``guess``.
+
+        With ``time``, ℓ̇ is over ground (the current's component along the path added).
+        """
+        current = None
+        if time is not None and self._current is not None:
+            current = current_velocity(*self._current, np.asarray(time)[:, None])
+        return path_coordinates(
+            self.config.path, s[..., X], s[..., Y], s[..., PSI], s[..., U], s[..., V], guess, current
+        )
+
+    def _cross_track(self, s: np.ndarray) -> np.ndarray:
+        """``(B, N)`` cross-track errors e of states ``s`` of every formation."""
+        if not self._curved:
+            return s[..., Y] - self._dy  # type: ignore[no-any-return]
+        return self._coordinates(s, self.arc).offset - self._dy  # type: ignore[no-any-return]
+
     def _current_at(self, t0: np.ndarray) -> Callable[[float], tuple[Any, Any] | None]:
         """The current ``(V_x, V_y)`` ``(B, 1)`` at ``t0 + t`` as a function of ``t`` (None: still water)."""
         if self._current is None:
@@ -495,13 +583,17 @@ class FormationCore:
         return lambda t: current_velocity(speed, amplitude, omega, cos_dir, sin_dir, start + t)
 
     def _along_track(
-        self, s: np.ndarray, time: np.ndarray | None = None, inertial: bool = False
+        self, s: np.ndarray, time: np.ndarray | None = None, inertial: bool = False, ids: Any = slice(None)
     ) -> tuple[np.ndarray, np.ndarray]:
-        """θ = x − D_x and ẋ of states ``s`` ``(b, N, 6)``.
+        """θ = x − D_x and ẋ of states ``s`` ``(b, N, 6)`` of formations ``ids``.
 
         ẋ is through the water (``u cos ψ − v sin ψ``), or with ``inertial`` over
-        ground, adding the current's V_x at ``time`` ``(b,)``.
+        ground, adding the current's V_x at ``time`` ``(b,)``. On a curved path:
+        θ = ℓ − D_x and ℓ̇ (docs/paths.md).
         """
+        if self._curved:
+            c = self._coordinates(s, self.arc[ids], time if inertial else None)
+            return c.ell - self._dx, c.ell_dot
         theta, x_dot = along_track(s[..., X], self._dx, s[..., PSI], s[..., U], s[..., V])
         if inertial and self._current is not None:
             x_dot = x_dot + current_velocity(*self._current, np.asarray(time)[:, None])[0]
@@ -517,21 +609,34 @@ class FormationCore:
         s, time = self.measured[ids], self.time[ids]
         b, n = s.shape[0], self.n
         out = np.zeros((b, n, self.layout.dim), dtype=np.float32)
-        out[..., 0] = s[..., Y] - self._dy
-        out[..., 1] = wrap_angle(s[..., PSI])
+        coords = None
+        if self._curved:
+            coords = self._coordinates(s, self.arc[ids], time if self.channel is not None else None)
+            out[..., 0] = coords.offset - self._dy
+            out[..., 1] = wrap_angle(coords.beta)
+            out[..., CURVATURE] = coords.kappa
+            out[..., CURVATURE_AHEAD] = cfg.path.curvature(coords.ell + LOOKAHEAD)
+        else:
+            out[..., 0] = s[..., Y] - self._dy
+            out[..., 1] = wrap_angle(s[..., PSI])
         out[..., 2:5] = s[..., U : R + 1]
         out[..., 5] = cfg.u_d.value(time)[:, None]
         out[..., 6] = cfg.u_d.rate(time)[:, None]
+        out[..., LANE_OFFSET] = self._dy
         slots = out[..., self.layout.own :].reshape(b, n, n - 1, self.layout.slot)
+        if coords is not None:
+            theta, x_dot = coords.ell - self._dx, coords.ell_dot
         if self.channel is None:
-            theta, x_dot = self._along_track(s)
+            if coords is None:
+                theta, x_dot = self._along_track(s)
             idx = self._slot_index
             slots[..., LINK] = self._slot_mask
             slots[..., COORDINATION], slots[..., VELOCITY] = slot_differences(
                 self._slot_mask, theta[:, :, None], theta[:, idx], x_dot[:, :, None], x_dot[:, idx]
             )
         else:
-            theta, x_dot = self._along_track(s, time, inertial=True)
+            if coords is None:
+                theta, x_dot = self._along_track(s, time, inertial=True)
             for k, feature in enumerate(self.channel.slots(ids, self._slot_index, time, theta, x_dot)):
                 slots[..., k] = feature
         return np.clip(out, self.obs_low, self.obs_high, out=out)
@@ -551,12 +656,17 @@ class FormationCore:
     def _outputs(self, actions: np.ndarray, u_c: np.ndarray | None) -> StepOutput:
         cfg, w = self.config, self.config.reward
         s = self.state
-        theta, x_dot = self._along_track(s)
+        if self._curved:
+            c = self._coordinates(s, self.arc)
+            theta, x_dot, e, heading = c.ell - self._dx, c.ell_dot, c.offset - self._dy, c.beta
+        else:
+            theta, x_dot = self._along_track(s)
+            e, heading = s[..., Y] - self._dy, s[..., PSI]
         u_d = cfg.u_d.value(self.time)[:, None]
         dt = cfg.dt
         components = {
-            "cross_track": cost_term(w.cross_track, s[..., Y] - self._dy, w.sigma_cross_track, dt),
-            "heading": cost_term(w.heading, wrap_angle(s[..., PSI]), w.sigma_heading, dt),
+            "cross_track": cost_term(w.cross_track, e, w.sigma_cross_track, dt),
+            "heading": cost_term(w.heading, wrap_angle(heading), w.sigma_heading, dt),
             "coordination": cost_term(
                 w.coordination, theta - theta.mean(axis=1, keepdims=True), w.sigma_coordination, dt
             ),
@@ -569,6 +679,8 @@ class FormationCore:
             axis=1,
         )
         out_of_bounds |= ~np.all(np.isfinite(s), axis=(1, 2))  # an unstable state ends the episode too
+        if self._curved:  # a vessel far from its lane is out of bounds
+            out_of_bounds |= np.any(np.abs(e) > cfg.corridor, axis=1)
         collision = min_separation(s) < cfg.safety_distance
         terminated = out_of_bounds | collision
         rate = w.total_weight if w.terminal_penalty else 0.0

@@ -216,7 +216,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 - the class default; each env sets its own render_fps
-        "name": "marine_formation_v0",
+        "name": "marine_formation_v1",
         "render_modes": ["human", "rgb_array"],
         "render_fps": 10,
     }

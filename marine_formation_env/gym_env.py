@@ -1,6 +1,6 @@
 """Centralized single-agent view: one gymnasium Env controls the whole formation.
 
-``gymnasium.make("MarineFormation-v0", **overrides)`` returns
+``gymnasium.make("MarineFormation-v1", **overrides)`` returns
 :class:`MarineFormationGymEnv`. It is the same simulation as the PettingZoo
 env (a one-formation view of :class:`~marine_formation_env.core.FormationCore`),
 with everything joined:

@@ -15,7 +15,11 @@ from gymnasium import spaces
 from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ObservationLayout", "observation_bounds", "observation_space"]
+__all__ = ["MIN_CURVATURE_BOUND", "ObservationLayout", "observation_bounds", "observation_space"]
+
+#: The curvature entries' bound [1/m] is at least this (a radius of 100 m), so that
+#: observation spaces of straight and gently curved scenarios are the same.
+MIN_CURVATURE_BOUND = 0.01
 
 
 @dataclass(frozen=True)
@@ -45,7 +49,7 @@ class ObservationLayout:
         return [(j + k + 1) % n for k in range(n - 1)]
 
     def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Split ``(..., dim)`` observations into own ``(..., 7)`` and slots ``(..., N−1, 4)``."""
+        """Split ``(..., dim)`` observations into own ``(..., 10)`` and slots ``(..., N−1, 4)``."""
         own = obs[..., : self.own]
         slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.n_vessels - 1, self.slot)
         return own, slots
@@ -57,16 +61,26 @@ def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
     x_lo, x_hi, y_lo, y_hi = cfg.workspace
     d = cfg.formation
     rate = max(2.0 * np.pi * cfg.u_d.amplitude / cfg.u_d.period, 0.1)
+    if cfg.straight:
+        e_max = max(abs(y_lo), abs(y_hi)) + float(np.max(np.abs(d[:, 1])))
+    else:
+        e_max = cfg.corridor  # beyond it the formation terminates
+    kappa_max = max(MIN_CURVATURE_BOUND, 1.0 / cfg.path.min_radius)
+    lane_max = max(float(np.max(np.abs(d[:, 1]))), 1.0)
     own_high = [
-        max(abs(y_lo), abs(y_hi)) + float(np.max(np.abs(d[:, 1]))),  # e_j
+        e_max,  # e_j
         np.pi,  # ψ
         cfg.max_speed,  # u
         cfg.max_speed,  # v
         cfg.max_yaw_rate,  # r
         cfg.u_max,  # u_d ∈ [U_min + a, U_max − a] by (19)
         rate,  # u̇_d
+        kappa_max,  # κ at the vessel
+        kappa_max,  # κ ahead
+        lane_max,  # D_y
     ]
-    own_low = [-own_high[0], -np.pi, -cfg.max_speed, -cfg.max_speed, -cfg.max_yaw_rate, cfg.u_min, -rate]
+    own_low = [-h for h in own_high]
+    own_low[5] = cfg.u_min
     dtheta = (x_hi - x_lo) + float(np.ptp(d[:, 0]))
     dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
     slot_low = [0.0, -dtheta, -dxdot, 0.0]
@@ -79,9 +93,12 @@ def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
 def observation_space(config: ScenarioConfig, joint: bool = False) -> spaces.Box:
     """One vessel's observation space (``joint``: the N vessels' concatenated).
 
-    Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|;
+    Bounds: ``e_j`` within the workspace's y-extent plus the largest |D_y|
+    (on a curved path: within the corridor);
     ψ in [−π, π]; u, v in ±max_speed; r in ±max_yaw_rate; u_d in
-    [U_min, U_max]; u̇_d within the profile's range (at least ±0.1 m/s²); link bits in
+    [U_min, U_max]; u̇_d within the profile's range (at least ±0.1 m/s²); the
+    curvatures within ±max(0.01, 1/R_min) 1/m; the lane offset within ±max(1 m,
+    max |D_y|); link bits in
     [0, 1]; coordination differences within the workspace's x-extent plus the
     spread of D_x; ẋ differences within ±2√2·max_speed; ages in
     [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate

@@ -27,7 +27,11 @@ import numpy as np
 __all__ = [
     "AGE",
     "COORDINATION",
+    "CURVATURE",
+    "CURVATURE_AHEAD",
+    "LANE_OFFSET",
     "LINK",
+    "LOOKAHEAD",
     "OWN_FEATURES",
     "OWN_SIZE",
     "SLOT_FEATURES",
@@ -45,11 +49,27 @@ __all__ = [
 ]
 
 #: The own part of a vessel's observation, in order.
-OWN_FEATURES = ("cross_track_error", "heading", "surge", "sway", "yaw_rate", "desired_speed", "desired_speed_rate")
+OWN_FEATURES = (
+    "cross_track_error",
+    "heading",
+    "surge",
+    "sway",
+    "yaw_rate",
+    "desired_speed",
+    "desired_speed_rate",
+    "path_curvature",
+    "path_curvature_ahead",
+    "lane_offset",
+)
 #: One slot of a vessel's observation (what it knows of one other vessel), in order.
 SLOT_FEATURES = ("linked", "coordination_error", "velocity_difference", "age")
 OWN_SIZE = len(OWN_FEATURES)
 SLOT_SIZE = len(SLOT_FEATURES)
+#: Offsets inside the own part: the path's curvature at the vessel's projection, at
+#: :data:`LOOKAHEAD` further along the path, and the vessel's lane offset D_y.
+CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = 7, 8, 9
+#: How far ahead [m] of its projection a vessel sees the path's curvature (20 s at 5 m/s).
+LOOKAHEAD = 100.0
 #: Offsets inside a slot.
 LINK, COORDINATION, VELOCITY, AGE = 0, 1, 2, 3
 

@@ -35,6 +35,7 @@ from marine_formation_env.errors import (
 )
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
+from marine_formation_env.paths import Path, make_path
 from marine_formation_env.settings import (
     ACROSS_SPACING,
     ACTION_LEVELS,
@@ -64,11 +65,13 @@ __all__ = [
     "Settings",
     "SpeedProfile",
     "config_from_dict",
+    "cross_track_errors",
     "formation_offsets",
     "initial_state_problem",
     "make_config",
     "make_settings",
     "min_separation",
+    "path_to_inertial",
     "resolve",
     "sample_initial_state",
     "sample_initial_states",
@@ -126,7 +129,8 @@ class ScenarioConfig:
         substeps: RK4 steps per control period.
         horizon: episode length [s].
         paper_as_printed: run (11) and (14) as printed.
-        initial_state: ``(n, 6)`` read-only nominal initial state.
+        initial_state: ``(n, 6)`` read-only nominal initial state, in the
+            path's frame (:attr:`start_state` is the same in the inertial frame).
         init_noise: half-widths of the initial-state noise.
         safety_distance: collision distance [m] (0: no check).
         workspace: ``(x_min, x_max, y_min, y_max)`` [m].
@@ -138,6 +142,9 @@ class ScenarioConfig:
         sensor_noise: the noise on each vessel's measurement of itself.
         topology_schedule: ``((dwell [s], graph), …)``, empty for a fixed graph.
         los_integral_gain: σ [m/s] of the speed level's integral LOS (0: plain LOS).
+        path: the reference path (:mod:`marine_formation_env.paths`).
+        corridor: on a curved path, the largest |e| [m] before a vessel is
+            out of bounds (``inf`` on the straight path).
     """
 
     name: str
@@ -171,8 +178,25 @@ class ScenarioConfig:
     sensor_noise: SensorNoise
     topology_schedule: tuple[tuple[float, CommGraph], ...]
     los_integral_gain: float
+    path: Path
+    corridor: float
 
     # --------------------------------------------------------------- derived
+    @functools.cached_property
+    def start_state(self) -> np.ndarray:
+        """``(n, 6)`` read-only nominal initial state in the inertial frame (columns x, y, ψ, u, v, r).
+
+        :attr:`initial_state` carried from the path's frame: position
+        ``P(ℓ) + offset·n(ℓ)``, heading ``γ(ℓ) + relative heading``. On the
+        straight path the two frames coincide and this is :attr:`initial_state`.
+        """
+        return _readonly(path_to_inertial(self.path, self.initial_state))
+
+    @property
+    def straight(self) -> bool:
+        """The paper's straight path (the simulation runs the paper's code unchanged)."""
+        return self.path.is_straight
+
     @property
     def ideal_observations(self) -> bool:
         """Ideal links, one fixed graph and noise-free measurements: the paper's information."""
@@ -207,6 +231,8 @@ class ScenarioConfig:
                 value = {"name": value.name, "links": value.links}
             elif f.name == "topology_schedule":
                 value = [{"dwell": dwell, "name": g.name, "links": g.links} for dwell, g in value]
+            elif isinstance(value, Path):
+                value = value.to_dict()
             elif isinstance(value, VesselParams):
                 value = dataclasses.asdict(value)
             elif dataclasses.is_dataclass(value) and not isinstance(value, type):
@@ -244,10 +270,11 @@ def resolve(settings: Settings) -> ScenarioConfig:
     offsets = _resolve_formation(s.formation, n)
     schedule, graph = _resolve_graphs(s, n, topology_seed)
     vessel, gains, profile = _resolve_vessel_and_speeds(s)
+    path, corridor = _resolve_path(s, offsets, gains, profile)
     dt, substeps = _resolve_timing(s, schedule)
     noise, nominal = _resolve_initial_state(s, n, offsets, profile)
     reward = _resolve_part(s.reward, RewardConfig, "reward")
-    workspace = _resolve_workspace(s, nominal, noise, offsets)
+    workspace = _resolve_workspace(s, path_to_inertial(path, nominal), noise, offsets, path, corridor)
     channel, current, sensor_noise = _resolve_sea_and_links(s, dt, n)
     config = ScenarioConfig(
         name=s.name,
@@ -281,8 +308,10 @@ def resolve(settings: Settings) -> ScenarioConfig:
         sensor_noise=sensor_noise,
         topology_schedule=schedule,
         los_integral_gain=float(s.los_integral_gain),
+        path=path,
+        corridor=corridor,
     )
-    problem = initial_state_problem(config, nominal, noise.as_array())
+    problem = initial_state_problem(config, config.start_state, noise.as_array())
     if problem is not None:
         raise ConfigError(f"initial_state: {problem}")
     return config
@@ -423,6 +452,82 @@ def _resolve_vessel_and_speeds(s: Settings) -> tuple[VesselParams, Gains, SpeedP
     return vessel, gains, profile
 
 
+def _resolve_path(s: Settings, offsets: np.ndarray, gains: Gains, profile: SpeedProfile) -> tuple[Path, float]:
+    """The path and the corridor, checked against the lanes and the generalized assumption (19).
+
+    Lane ``j`` (offset ``D_yj``) on a part of curvature ``κ`` needs
+    ``1 − κ·D_yj > 0`` (inside the radius of curvature) and, for the surge
+    command ``(1 − κ·D_yj)·w`` with ``w ∈ (u_d − a, u_d + a)``,
+    ``(1 − κ·D_yj)·(u_d ± a)`` inside ``[U_min, U_max]`` for every ``u_d(t)``
+    (docs/paths.md, "The generalized assumption (19)").
+    """
+    try:
+        path = make_path(s.path)
+    except TypeError as err:
+        raise ConfigError(f"path: {err}") from None
+    if not path.is_straight and s.paper_as_printed:
+        raise ConfigError(
+            "paper_as_printed runs the printed (11) and (14), which are written for the paper's straight path; "
+            f"it cannot be combined with a curved path ({path.kind!r})"
+        )
+    if path.is_straight:
+        if s.corridor is not None:
+            raise ConfigError(
+                f"corridor = {s.corridor!r} applies to curved paths; on the straight path the workspace's "
+                "y-extent bounds |e| (set workspace instead)"
+            )
+        return path, math.inf
+    lo, hi = profile.bounds
+    a = gains.a
+    for kappa in path.curvatures:
+        if kappa == 0.0:
+            continue
+        radius = 1.0 / abs(float(kappa))
+        side = "left" if kappa > 0 else "right"
+        for j, d_y in enumerate(offsets[:, 1]):
+            factor = 1.0 - float(kappa) * float(d_y)
+            where = f"the lane of vessel_{j} (D_y = {d_y:g} m) on the {side} turn of radius {radius:g} m"
+            if factor <= 0.0:
+                raise ConfigError(
+                    f"{where} lies beyond the turn's centre of curvature: every |D_y| must be < {radius:g} m"
+                )
+            slow, fast = factor * (lo - a), factor * (hi + a)
+            if slow < s.u_min - 1e-9 or fast > s.u_max + 1e-9:
+                raise ConfigError(
+                    f"{where} needs surge speeds (1 − κ·D_y)·(u_d ± a) from {slow:.4g} to {fast:.4g} m/s, outside the "
+                    f"band [U_min, U_max] = [{s.u_min:g}, {s.u_max:g}] m/s: the generalized assumption (19) fails "
+                    f"(use a larger radius, a narrower formation or a wider band)"
+                )
+    room = path.min_radius - float(np.max(np.abs(offsets[:, 1])))
+    if s.corridor is None:
+        corridor = min(250.0, 0.5 * room)
+    else:
+        check_number("scenario", "corridor", s.corridor, strict=True)
+        corridor = float(s.corridor)
+        if corridor >= room:
+            raise ConfigError(
+                f"corridor = {corridor:g} m reaches past the tightest centre of curvature: the outermost lane is "
+                f"{room:g} m from it (radius {path.min_radius:g} m); choose corridor < {room:g} m"
+            )
+    return path, corridor
+
+
+def path_to_inertial(path: Path, state: np.ndarray) -> np.ndarray:
+    """``(..., 6)`` states from the path's frame (ℓ, normal offset, relative heading, u, v, r) to the inertial one.
+
+    The identity on the straight path (the same array values, exactly).
+    """
+    state = np.asarray(state, dtype=float)
+    if path.is_straight:
+        return np.array(state)
+    px, py, gamma, _ = path.frame(state[..., 0])
+    out = np.array(state)
+    out[..., 0] = px - state[..., 1] * np.sin(gamma)
+    out[..., 1] = py + state[..., 1] * np.cos(gamma)
+    out[..., 2] = state[..., 2] + np.mod(gamma + np.pi, 2.0 * np.pi) - np.pi
+    return out
+
+
 def _resolve_timing(s: Settings, schedule: tuple[tuple[float, CommGraph], ...]) -> tuple[float, int]:
     """``dt`` (the level's default when None) and ``substeps``; the horizon and the limits checked."""
     dt = ACTION_LEVELS[s.action_level] if s.dt is None else s.dt
@@ -477,9 +582,26 @@ def _resolve_part(value: Any, cls: type, name: str) -> Any:
 
 
 def _resolve_workspace(
-    s: Settings, nominal: np.ndarray, noise: InitNoise, offsets: np.ndarray
+    s: Settings, nominal: np.ndarray, noise: InitNoise, offsets: np.ndarray, path: Path, corridor: float
 ) -> tuple[float, float, float, float]:
-    """The workspace box; by default one that holds the whole nominal run with margins of 500 m and 250 m."""
+    """The workspace box; by default one that holds the whole nominal run with margins of 500 m and 250 m.
+
+    On a curved path: the box around the path from behind the start to as
+    far as a vessel could go in the horizon, widened by the lanes, the
+    corridor and 250 m.
+    """
+    if s.workspace is None and not path.is_straight:
+        spread = noise.as_array()
+        ell = path.closest(nominal[:, 0], nominal[:, 1])
+        reach = 2.0 * s.u_max * s.horizon  # ℓ̇ can exceed u on an inner lane: a generous bound
+        points = path.points(float(np.min(ell)) - spread[0] - 500.0, float(np.max(ell)) + spread[0] + reach)
+        margin = float(np.max(np.abs(offsets[:, 1]))) + corridor + float(spread[1]) + 250.0
+        return (
+            float(points[:, 0].min()) - margin,
+            float(points[:, 0].max()) + margin,
+            float(points[:, 1].min()) - margin,
+            float(points[:, 1].max()) + margin,
+        )
     if s.workspace is None:
         spread = noise.as_array()
         x_lo = float(np.min(nominal[:, 0]) - spread[0]) - 500.0
@@ -545,6 +667,16 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
                 f"vessel_{j} starts at {name} = {value:g} {unit}{drawn}, outside {what}: "
                 f"{name} ∈ [{lo:g}, {hi:g}] {unit}; the episode would end at its first step"
             )
+    if not config.straight:
+        e = cross_track_errors(config, state)
+        reach = np.abs(e) + float(max(spread[0], spread[1]))
+        bad = np.flatnonzero(reach > config.corridor)
+        if bad.size:
+            j = int(bad[0])
+            return (
+                f"vessel_{j} starts {e[j]:+.4g} m off its lane (± init_noise {max(spread[0], spread[1]):g} m), "
+                f"outside the corridor |e| ≤ {config.corridor:g} m; the episode would end at its first step"
+            )
     if config.safety_distance > 0:
         first, second = np.triu_indices(state.shape[0], k=1)
         dist = np.hypot(state[first, 0] - state[second, 0], state[first, 1] - state[second, 1])
@@ -558,6 +690,18 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
     return None
 
 
+def cross_track_errors(config: ScenarioConfig, state: np.ndarray) -> np.ndarray:
+    """``(..., N)`` cross-track errors ``e_j`` [m] of inertial states ``(..., N, 6)``, by a global search on the path.
+
+    For a start (or any state without history); the simulation follows the
+    projection continuously instead (:meth:`~marine_formation_env.paths.Path.project`).
+    """
+    x, y = state[..., 0], state[..., 1]
+    ell = config.path.closest(x, y)
+    px, py, gamma, _ = config.path.frame(ell)
+    return (y - py) * np.cos(gamma) - (x - px) * np.sin(gamma) - config.formation[:, 1]  # type: ignore[no-any-return]
+
+
 def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np.ndarray:
     """The nominal initial state plus uniform ``init_noise``, shape ``(N, 6)``, drawn from ``rng``.
 
@@ -568,10 +712,10 @@ def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np
         RuntimeError: no acceptable draw in 100 tries (names the noise and the distance).
     """
     if config.init_noise.is_zero:
-        return np.array(config.initial_state)
+        return np.array(config.start_state)
     half_widths = config.init_noise.as_array()
     for _ in range(100):
-        candidate = config.initial_state + rng.uniform(-1.0, 1.0, size=config.initial_state.shape) * half_widths
+        candidate = config.start_state + rng.uniform(-1.0, 1.0, size=config.start_state.shape) * half_widths
         if min_separation(candidate[None])[0] > 2.0 * config.safety_distance:
             return candidate
     raise RuntimeError(
@@ -583,7 +727,7 @@ def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np
 def sample_initial_states(config: ScenarioConfig, rngs: Sequence[np.random.Generator]) -> np.ndarray:
     """One initial state per generator, ``(len(rngs), N, 6)`` (see :func:`sample_initial_state`)."""
     if config.init_noise.is_zero:
-        return np.broadcast_to(config.initial_state, (len(rngs), config.n_vessels, 6)).copy()
+        return np.broadcast_to(config.start_state, (len(rngs), config.n_vessels, 6)).copy()
     return np.stack([sample_initial_state(config, rng) for rng in rngs])
 
 
@@ -625,6 +769,8 @@ def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
         topology = values.get("topology")
         if isinstance(topology, Mapping):
             values["topology"] = CommGraph.from_links(n, topology["links"], topology["name"])
+        if "corridor" in values and values["corridor"] == math.inf:
+            values["corridor"] = None  # the straight path's (none)
         vessel = values.get("vessel")
         if isinstance(vessel, Mapping):
             values["vessel"] = VesselParams(**vessel)

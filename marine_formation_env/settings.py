@@ -27,6 +27,7 @@ from marine_formation_env.channel import ChannelConfig, GilbertElliott
 from marine_formation_env.disturbances import Current, SensorNoise
 from marine_formation_env.errors import ConfigError, UnknownSettingError, check_bool, check_number
 from marine_formation_env.params import Gains
+from marine_formation_env.paths import CirclePath, LawnmowerPath, Path, StraightPath
 
 __all__ = [
     "ACTION_LEVELS",
@@ -196,7 +197,10 @@ class Settings:
         horizon: episode length [s]; truncation after ``round(horizon/dt)`` steps.
         paper_as_printed: run (11) and (14) exactly as printed (docs/model.md §3).
         initial_state: nominal ``(n, 6)`` initial state, or None for the
-            formation slots at speed u_d(0) heading along the path.
+            formation slots at speed u_d(0) heading along the path. Its
+            columns are in the path's frame: arc length ℓ, offset along the
+            path's normal, heading relative to the path's tangent, u, v, r
+            (on the straight path, the inertial x, y, ψ, u, v, r).
         init_noise: uniform noise added to the nominal initial state at reset.
         safety_distance: two vessels closer than this [m] collide (terminates).
         workspace: ``(x_min, x_max, y_min, y_max)`` [m]; None derives a box that
@@ -216,6 +220,16 @@ class Settings:
             allowed speed could not hold its path.
         sensor_noise: noise on each vessel's measurement of itself
             (:class:`SensorNoise` or a mapping).
+        path: the reference path (:mod:`marine_formation_env.paths`): a
+            :class:`~marine_formation_env.paths.Path`, a kind name, or a
+            mapping with ``kind`` (``{"kind": "circle", "radius": 400.0}``);
+            a mapping without ``kind`` updates the scenario's path field by
+            field. Default: the paper's straight line.
+        corridor: on a curved path, the largest cross-track error |e| [m]
+            before a vessel is out of bounds (terminates); None: half the
+            distance from the outermost lane to the tightest centre of
+            curvature, at most 250 m. The straight path has no corridor (the
+            workspace's y-extent bounds |e|).
         los_integral_gain: σ [m/s] of integral LOS in the ``speed`` level's
             built-in path follower (our extension, Børhaug, Pavlov and
             Pettersen, CDC 2008): it steers on ``e + σ·e_int`` with
@@ -256,7 +270,12 @@ class Settings:
     sensor_noise: Any = field(default_factory=SensorNoise)
     topology_schedule: Any = ()
     los_integral_gain: float = 0.0
+    path: Any = field(default_factory=StraightPath)
+    corridor: Any = None
 
+
+#: The lawnmower route of the ``survey`` presets (docs/paths.md).
+SURVEY_ROUTE = LawnmowerPath(legs=4, leg_length=2000.0, spacing=600.0, turn_radius=300.0, first_turn="left")
 
 #: The paper's scenario (docs/model.md §5).
 _PAPER: dict[str, Any] = {
@@ -286,6 +305,9 @@ _PAPER: dict[str, Any] = {
 #:   (delivered at the next control instant, as a message never arrives
 #:   before it could), 5 km range.
 #: * ``current``: a 0.5 m/s cross current (towards +y), constant, over ideal links.
+#: * ``circle``, ``survey``, ``survey_acoustic``: the paper's formation on a circle of
+#:   300 m, on a lawnmower survey (4 legs of 2 km), and on that survey over ``acoustic``
+#:   links (docs/paths.md).
 SCENARIOS: dict[str, dict[str, Any]] = {
     "paper": _PAPER,
     "acoustic": {
@@ -305,6 +327,19 @@ SCENARIOS: dict[str, dict[str, Any]] = {
         "channel": ChannelConfig(loss=0.05, latency=0.05, tdma_slot=0.5, range=5000.0),
     },
     "current": {**_PAPER, "name": "current", "current": Current(speed=0.5, direction=math.pi / 2)},
+    # Curved paths (docs/paths.md). The paper's formation, gains and initial state (carried onto the
+    # path: the state's columns are in the path's frame). With D_y = ±50 m, u_d = 5 m/s, a = 1 m/s and
+    # U_max = 7 m/s, the generalized (19) needs every radius ≥ 300 m: the circle is the tightest admissible.
+    "circle": {**_PAPER, "name": "circle", "path": CirclePath(radius=300.0, turn="left")},
+    # A lawnmower survey: 4 legs of 2 km, joined by half circles of the smallest admissible radius
+    # (spacing = 2·turn_radius): 9.0 km of route from the first waypoint to the last, which the formation
+    # passes after about 1820 s at 5 m/s; the episode ends 180 s later, on the last leg run on.
+    "survey": {**_PAPER, "name": "survey", "path": SURVEY_ROUTE, "horizon": 2000.0},
+}
+SCENARIOS["survey_acoustic"] = {
+    **SCENARIOS["survey"],
+    "name": "survey_acoustic",
+    "channel": SCENARIOS["acoustic"]["channel"],
 }
 
 #: Initial-state noise used when the formation is generated (n differs from the
@@ -361,7 +396,11 @@ def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
         factory = defaults[key].default_factory
         if current is None and callable(factory):
             current = factory()
-        if isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
+        if isinstance(current, Path) and isinstance(value, Mapping):
+            # a mapping updates the scenario's path field by field, unless it names another kind
+            same_kind = value.get("kind", current.kind) == current.kind
+            base[key] = {**current.to_dict(), **value} if same_kind else dict(value)
+        elif isinstance(value, Mapping) and dataclasses.is_dataclass(current) and not isinstance(current, type):
             # unknown keys are reported when ScenarioConfig builds the merged mapping
             base[key] = {**{f.name: getattr(current, f.name) for f in dataclasses.fields(current)}, **value}
         else:

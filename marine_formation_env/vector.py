@@ -2,15 +2,15 @@
 
 ``MarineFormationVectorEnv(num_envs=B, ...)`` steps ``B`` formations of the
 scenario at once with :class:`~marine_formation_env.core.FormationCore`. It is
-the ``vector_entry_point`` of ``MarineFormation-v0``::
+the ``vector_entry_point`` of ``MarineFormation-v1``::
 
-    envs = gymnasium.make_vec("MarineFormation-v0", num_envs=64, vectorization_mode="vector_entry_point",
+    envs = gymnasium.make_vec("MarineFormation-v1", num_envs=64, vectorization_mode="vector_entry_point",
                               action_level="speed", n_vessels=5, topology="ring")
 
 Two layouts of the same simulation:
 
 * ``layout="joint"`` (default): one entry per formation, as the centralized
-  ``gymnasium.make("MarineFormation-v0")`` view: observation ``(N·dim,)`` (the
+  ``gymnasium.make("MarineFormation-v1")`` view: observation ``(N·dim,)`` (the
   vessels' masked observations concatenated), action ``(N·A,)``, reward the mean
   of the vessels' rewards. ``num_envs = B``. Infos are the gym view's, stacked:
   ``infos["vessel_rewards"]`` ``(B, N)``, ``infos["reward_<term>"]`` each

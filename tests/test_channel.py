@@ -397,10 +397,10 @@ def test_extrapolation_recovers_the_current_difference_for_constant_velocities()
     obs = np.zeros(layout.dim)
     u_j, u_i, age = 5.2, 4.6, 3.0
     true_gap = 12.0  # θ_j − θ_i now
-    obs[:7] = [0.0, 0.0, u_j, 0.0, 0.0, 5.0, 0.0]
+    obs[:10] = [0.0, 0.0, u_j, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 0.0]
     # vessel 2 receives from 0 and 1 (paper graph); both slots hold a 3 s old message of speed u_i
     for s in range(2):
-        base = 7 + 4 * s
+        base = 10 + 4 * s
         stale_gap = true_gap + u_i * age  # θ_j(now) − θ_i(now − age)
         obs[base : base + 4] = [1.0, stale_gap, u_j - u_i, age]
     plain = ReferencePolicy(cfg).commands(obs)["u_c"]
@@ -511,7 +511,7 @@ def test_gymnasium_checker_passes_on_the_acoustic_preset():
     import gymnasium
     from gymnasium.utils.env_checker import check_env
 
-    env = gymnasium.make("MarineFormation-v0", scenario="acoustic", horizon=30.0)
+    env = gymnasium.make("MarineFormation-v1", scenario="acoustic", horizon=30.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(env.unwrapped)
@@ -562,13 +562,13 @@ def test_no_message_is_seen_before_it_could_have_arrived():
         obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
         for o in obs.values():
             assert space.contains(o)
-            linked, ages = o[7::4], o[10::4]
+            linked, ages = o[10::4], o[13::4]
             assert np.all(ages[linked == 0] == 0)
             fresh = ages[linked == 1]
             assert np.all(fresh >= 20.0)
             seen += fresh.size
         if env.time < 20.0:
-            assert all(not o[7::4].any() for o in obs.values())
+            assert all(not o[10::4].any() for o in obs.values())
     assert seen > 0
 
 

@@ -37,7 +37,7 @@ PAPER_NEIGHBOURS = {0: {1}, 1: set(), 2: {0, 1}}
 # RewardConfig defaults (its docstring / the env docstring): Σ weights = 1 + 0.25 + 1 + 0.5 + 0.
 DEFAULT_TOTAL_WEIGHT = 2.75
 
-OWN = 7
+OWN = 10  # docs/model.md §7: e, ψ, u, v, r, u_d, u̇_d, κ, κ ahead, D_y
 SLOT = 4
 
 
@@ -150,8 +150,8 @@ def test_agents_and_spaces(level):
     assert act.shape == (ACTION_DIM[level],)
     assert act.dtype == np.float32
     assert np.all(act.low == -1.0) and np.all(act.high == 1.0)
-    # docs/model.md §7 / core docstring: 7 own entries + 4 per other vessel
-    assert first_obs_space.shape == (7 + 4 * 2,)
+    # docs/model.md §7 / core docstring: 10 own entries + 4 per other vessel
+    assert first_obs_space.shape == (10 + 4 * 2,)
     assert env.state_space.shape == (3 * 6 + 1,)
 
 
@@ -175,11 +175,11 @@ def test_six_vessel_ring():
     env = marine_formation_env.parallel_env(n_vessels=6, topology="ring", horizon=5.0)
     obs, _ = env.reset(seed=0)
     assert env.possible_agents == [f"vessel_{j}" for j in range(6)]
-    assert env.observation_space("vessel_3").shape == (7 + 4 * 5,)
+    assert env.observation_space("vessel_3").shape == (10 + 4 * 5,)
     assert env.state_space.shape == (6 * 6 + 1,)
     for j in range(6):
         o = obs[f"vessel_{j}"]
-        assert o.shape == (27,)
+        assert o.shape == (30,)
         # ring j → j+1: vessel j receives from j−1 only, which sits in slot (j−1−j−1) mod 6 = 4
         links = slot_view(o, 6)[:, 0]
         expected = np.zeros(5)
@@ -357,6 +357,9 @@ def test_own_observation_matches_hand_computation():
             x0[j, 5],
             5.0,  # u_d
             0.0,  # u̇_d (constant)
+            0.0,  # κ at the vessel: the straight path
+            0.0,  # κ ahead
+            PAPER_D[j, 1],  # D_y, the lane offset
         ]
         np.testing.assert_allclose(o[:OWN], expected, rtol=1e-6, atol=1e-7)
         assert -math.pi <= o[1] <= math.pi

@@ -1,4 +1,4 @@
-"""The centralized gymnasium view ``gymnasium.make("MarineFormation-v0")`` (docs/model.md §7).
+"""The centralized gymnasium view ``gymnasium.make("MarineFormation-v1")`` (docs/model.md §7).
 
 Truth comes from outside the view: gymnasium's and Stable-Baselines3's own env
 checkers (which must pass without a single warning), gymnasium's and
@@ -23,10 +23,10 @@ import marine_formation_env
 from marine_formation_env.gym_env import MarineFormationGymEnv
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-ENV_ID = "MarineFormation-v0"
+ENV_ID = "MarineFormation-v1"
 LEVELS = ("force", "guidance", "speed")
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
-OWN, SLOT = 7, 4
+OWN, SLOT = 10, 4
 
 # docs/model.md §5, typed in by hand (columns x, y, psi, u, v, r; offsets D_x, D_y).
 PAPER_X0 = np.array(
@@ -40,7 +40,7 @@ PAPER_D = np.array([[-100.0, 50.0], [0.0, 0.0], [-100.0, -50.0]])
 
 
 def obs_dim(n: int) -> int:
-    """docs/model.md §7 / env docstring: 7 own entries plus a 4-entry slot per other vessel."""
+    """docs/model.md §7 / env docstring: 10 own entries plus a 4-entry slot per other vessel."""
     return OWN + SLOT * (n - 1)
 
 
@@ -87,19 +87,19 @@ def test_make_five_vessel_ring_shapes():
     env = gymnasium.make(ENV_ID, scenario="paper", action_level="speed", topology="ring", n_vessels=5)
     assert isinstance(env.unwrapped, MarineFormationGymEnv)
     assert isinstance(env.observation_space, spaces.Box)
-    assert env.observation_space.shape == (5 * (7 + 4 * 4),)
+    assert env.observation_space.shape == (5 * (10 + 4 * 4),)
     assert env.observation_space.dtype == np.float32
     assert isinstance(env.action_space, spaces.Box)
     assert env.action_space.shape == (5,)
     assert env.action_space.dtype == np.float32
     assert np.all(env.action_space.low == -1.0) and np.all(env.action_space.high == 1.0)
     obs, info = env.reset(seed=0)
-    assert obs.shape == (115,)
+    assert obs.shape == (130,)
     assert obs.dtype == np.float32
     assert isinstance(info, dict)
     assert env.observation_space.contains(obs)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
-    assert obs.shape == (115,) and env.observation_space.contains(obs)
+    assert obs.shape == (130,) and env.observation_space.contains(obs)
     assert isinstance(reward, float) and np.isfinite(reward)
     assert terminated is False and truncated is False
     env.close()
@@ -233,6 +233,8 @@ def test_reset_with_initial_state_sets_it():
         np.testing.assert_allclose(own[2:5], x0[j, 3:6], rtol=1e-6)
         assert own[5] == pytest.approx(5.0)  # u_d of the paper scenario
         assert own[6] == 0.0
+        assert own[7] == own[8] == 0.0  # the straight path's curvature, now and ahead
+        assert own[9] == PAPER_D[j, 1]  # the lane offset
     # the seed does not matter when the state is given
     obs2, _ = env.reset(seed=999, options={"initial_state": x0})
     np.testing.assert_array_equal(obs, obs2)

@@ -84,9 +84,9 @@ def test_links_that_are_down_are_drawn_differently():
 
 FRONTS = {
     "parallel_env": lambda **kw: marine_formation_env.parallel_env(**kw),
-    "gymnasium.make": lambda **kw: __import__("gymnasium").make("MarineFormation-v0", **kw).unwrapped,
+    "gymnasium.make": lambda **kw: __import__("gymnasium").make("MarineFormation-v1", **kw).unwrapped,
     "make_vec": lambda **kw: __import__("gymnasium").make_vec(
-        "MarineFormation-v0", num_envs=2, vectorization_mode="vector_entry_point", **kw
+        "MarineFormation-v1", num_envs=2, vectorization_mode="vector_entry_point", **kw
     ),
 }
 

@@ -42,7 +42,7 @@ from training.learned import load_learned_policy
 
 pytestmark = pytest.mark.backend_independent
 
-ENV_ID = "MarineFormation-v0"
+ENV_ID = "MarineFormation-v1"
 REPO = Path(__file__).resolve().parents[1]
 SPEED_CONFIG = REPO / "training" / "configs" / "paper_speed_ppo.yaml"
 PROG = "python -m training.train"
@@ -316,7 +316,7 @@ def test_validate_accepts_what_sb3_accepts():
 
 
 def test_malformed_yaml_names_the_file_and_the_parsers_line_and_column(tmp_path):
-    text = "MarineFormation-v0:\n  algo: ppo\n  n_steps: [16, 32\n  gamma: 0.9\n"
+    text = "MarineFormation-v1:\n  algo: ppo\n  n_steps: [16, 32\n  gamma: 0.9\n"
     path = tmp_path / "broken.yaml"
     path.write_text(text)
     with pytest.raises(yaml.MarkedYAMLError) as parser:
@@ -346,7 +346,7 @@ def test_the_algorithm_is_built_once_and_its_errors_name_the_algo():
 
 def _broken_yaml(folder: Path) -> tuple[Path, str]:
     path = folder / "broken.yaml"
-    text = "MarineFormation-v0:\n  algo: ppo\n  policy_kwargs: {net_arch: [64, 64]\n  n_steps: 16\n"
+    text = "MarineFormation-v1:\n  algo: ppo\n  policy_kwargs: {net_arch: [64, 64]\n  n_steps: 16\n"
     path.write_text(text)
     try:
         yaml.safe_load(text)

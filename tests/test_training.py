@@ -37,7 +37,7 @@ from training.config import TrainConfigError, algo_class, algo_kwargs, apply_ove
 from training.learned import ModelPolicy, load_learned_policy
 from training.vec_env import SharedPolicyVecEnv
 
-ENV_ID = "MarineFormation-v0"
+ENV_ID = "MarineFormation-v1"
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / "training" / "configs").glob("*.yaml"))
 SPEED_CONFIG = REPO / "training" / "configs" / "paper_speed_ppo.yaml"
@@ -181,11 +181,11 @@ def test_shared_policy_vec_env_in_sb3_wrappers_and_utilities():
     venv = SharedPolicyVecEnv(b_count, "paper", **kw)
     check_for_nested_spaces(venv.observation_space)
     _keys, shapes, dtypes = obs_space_info(venv.observation_space)
-    assert shapes[None] == (7 + 4 * (n - 1),) and dtypes[None] == np.float32
+    assert shapes[None] == (10 + 4 * (n - 1),) and dtypes[None] == np.float32
     wrapped = VecNormalize(VecMonitor(VecCheckNan(venv, raise_exception=True)), gamma=0.99)
     wrapped.seed(3)
     obs = wrapped.reset()
-    assert obs.shape == (b_count * n, 7 + 4 * (n - 1))
+    assert obs.shape == (b_count * n, 10 + 4 * (n - 1))
     envs = [marine_formation_env.parallel_env(**kw) for _ in range(b_count)]
     for b, env in enumerate(envs):
         env.reset(seed=3 + b)
@@ -456,7 +456,7 @@ def test_smoke_run_writes_the_run_folder(smoke_run):
         assert (smoke_run / "checkpoints" / f"model_vecnormalize_{steps}_steps.pkl").is_file()
     model = PPO.load(smoke_run / "model.zip", device="cpu")
     assert model.num_timesteps >= 600
-    assert model.observation_space.shape == (7 + 4 * 2,)
+    assert model.observation_space.shape == (10 + 4 * 2,)
     assert model.action_space.shape == (1,)
 
 

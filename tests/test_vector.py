@@ -1,4 +1,4 @@
-"""The batched vector env ``gymnasium.make_vec("MarineFormation-v0", vectorization_mode="vector_entry_point")``.
+"""The batched vector env ``gymnasium.make_vec("MarineFormation-v1", vectorization_mode="vector_entry_point")``.
 
 Truth: B PettingZoo ParallelEnvs stepped by hand with the seeds the module
 docstring promises (``seed + b``), following Gymnasium's documented autoreset
@@ -22,7 +22,7 @@ from gymnasium.vector import AutoresetMode
 import marine_formation_env
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-ENV_ID = "MarineFormation-v0"
+ENV_ID = "MarineFormation-v1"
 LEVELS = ("force", "guidance", "speed")
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
 DT = {"force": 0.1, "guidance": 0.5, "speed": 0.5}
@@ -30,7 +30,7 @@ MODES = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
 LAYOUTS = ("joint", "agent")
 
 N = 4
-DIM = 7 + 4 * (N - 1)
+DIM = 10 + 4 * (N - 1)
 SCENARIO = {"n_vessels": N, "topology": "ring"}  # random initial states: the seeds matter
 
 

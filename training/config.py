@@ -2,7 +2,7 @@
 
 A config file holds one mapping under the env id::
 
-    MarineFormation-v0:
+    MarineFormation-v1:
       algo: ppo                  # ppo | sac | td3 | a2c
       scenario: paper
       env_kwargs:                # any parallel_env override
@@ -139,7 +139,7 @@ _Loader.add_implicit_resolver(
 
 
 def load_config(path: str | Path) -> dict[str, Any]:
-    """Read a config file and return its (unvalidated) mapping for ``MarineFormation-v0``.
+    """Read a config file and return its (unvalidated) mapping for ``MarineFormation-v1``.
 
     Raises:
         TrainConfigError: a missing or unreadable file, malformed YAML (with the
@@ -154,6 +154,13 @@ def load_config(path: str | Path) -> dict[str, Any]:
         raise TrainConfigError(f"config file {str(path)!r} is not UTF-8 ({err.reason} at byte {err.start})") from None
     except yaml.YAMLError as err:
         raise TrainConfigError(f"config file {str(path)!r} is not valid YAML: {_yaml_problem(err)}") from None
+    if isinstance(data, dict) and len(data) == 1 and str(next(iter(data))).startswith("MarineFormation-v"):
+        found = str(next(iter(data)))
+        if found != ENV_ID:
+            raise TrainConfigError(
+                f"{path}: the config is for {found}, but this version of the package has {ENV_ID} (the observation "
+                "layout changed: docs/CHANGELOG.md); check the config and rename its key"
+            )
     if not isinstance(data, dict) or list(data) != [ENV_ID] or not isinstance(data[ENV_ID], dict):
         keys = list(data) if isinstance(data, dict) else type(data).__name__
         raise TrainConfigError(f"{path}: expected one mapping under {ENV_ID!r}, found {keys}")
@@ -411,7 +418,7 @@ def add_run_arguments(parser: Any) -> None:
     """
     from marine_formation_env.cli import int_at_least
 
-    parser.add_argument("--config", type=Path, default=None, help="YAML file (a mapping under MarineFormation-v0)")
+    parser.add_argument("--config", type=Path, default=None, help="YAML file (a mapping under MarineFormation-v1)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override; dots nest")
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the run (default 0)")
     parser.add_argument("--out", type=Path, required=True, help="run folder")

@@ -18,7 +18,7 @@ with it. Starting a cluster (:mod:`training.ray_cluster`)::
     ray start --head --port=6379                 # on the head node
     ray start --address=HEAD_IP:6379             # on every other node
 
-The config file holds one mapping under ``MarineFormation-v0`` (the same
+The config file holds one mapping under ``MarineFormation-v1`` (the same
 ``--set KEY=VALUE`` grammar as ``training.train``, dots nest; unknown keys and
 bad values are refused by name):
 

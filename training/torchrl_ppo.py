@@ -13,7 +13,7 @@ not at a collision or a workspace exit (termination), clipped PPO updates::
     python -m training.torchrl_ppo --config training/configs/torchrl/paper_speed_mappo.yaml \\
         --set minutes=2 --set env_kwargs.topology=chain --out runs/try --overwrite
 
-The config file holds one mapping under ``MarineFormation-v0``, like the SB3
+The config file holds one mapping under ``MarineFormation-v1``, like the SB3
 configs of ``training.train`` (the same ``--set KEY=VALUE`` grammar, dots
 nest; unknown keys and bad values are refused by name):
 
