@@ -9,6 +9,13 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   what "heading" then measures;
 * coordination spread max_j θ_j − min_j θ_j (goal 9a);
 * speed error u_j − u_d(t) (goals 9b, 10);
+* on a curved path (docs/paths.md) the same goals in path coordinates, from
+  each vessel's projection ℓ_j followed through the recorded states:
+  cross-track e_j = (p_j − P(ℓ_j))·n − D_yj; heading: the course over ground
+  relative to the path's tangent, χ_j − γ(ℓ_j) (a vessel on its lane crabs
+  into the turn, so its heading cannot be the tangent's); θ_j = ℓ_j − D_xj;
+  speed error: the vessel's speed along its lane minus the lane's speed,
+  (1 − κ·D_yj)·(ℓ̇_j − u_d), in m/s along the lane;
 * settling time: the earliest time after which, until the end of the episode,
   max |e_j| ≤ 0.5 m, max |ψ_j| ≤ 0.5°, the spread ≤ 0.5 m and
   max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
@@ -30,9 +37,10 @@ import numpy as np
 
 from baselines.rollout import Trajectory
 from marine_formation_env.dynamics import PSI, U, V, X, Y, wrap_angle
+from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["SETTLING_BANDS", "SUCCESS_BANDS", "episode_metrics", "settling_time", "summarize"]
+__all__ = ["SETTLING_BANDS", "SUCCESS_BANDS", "episode_metrics", "path_coordinates_along", "settling_time", "summarize"]
 
 #: Tolerances that define "settled": cross-track [m], heading [deg], spread [m], speed [m/s].
 SETTLING_BANDS = {"cross_track": 0.5, "heading_deg": 0.5, "spread": 0.5, "speed": 0.05}
@@ -50,8 +58,41 @@ def _heading(traj: Trajectory, cfg: ScenarioConfig) -> np.ndarray:
     return np.arctan2(u * np.sin(psi) + v * np.cos(psi) + vc_y, u * np.cos(psi) - v * np.sin(psi) + vc_x)
 
 
+def path_coordinates_along(traj: Trajectory, cfg: ScenarioConfig) -> PathCoordinates:
+    """Path coordinates ``(T+1, n)`` of a trajectory on a curved path (ℓ̇ over ground with a current).
+
+    The projection starts from a global search at the first instant and is
+    then followed from one recorded instant to the next (Newton steps from the
+    previous ℓ), as the simulation follows it.
+    """
+    s = traj.state
+    guess = cfg.path.closest(s[0, :, X], s[0, :, Y])
+    rows = []
+    for k in range(len(s)):
+        current = None if cfg.current.is_zero else cfg.current.velocity(traj.t[k])
+        c = path_coordinates(cfg.path, s[k, :, X], s[k, :, Y], s[k, :, PSI], s[k, :, U], s[k, :, V], guess, current)
+        rows.append(c)
+        guess = c.ell
+    return PathCoordinates(*(np.stack(column) for column in zip(*rows, strict=True)))
+
+
 def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
     s = traj.state
+    if not cfg.straight:
+        c = path_coordinates_along(traj, cfg)
+        psi, u, v = s[..., PSI], s[..., U], s[..., V]
+        if cfg.current.is_zero:
+            course = psi + np.arctan2(v, u)
+        else:
+            vc_x, vc_y = cfg.current.velocity(traj.t[:, None])
+            course = np.arctan2(u * np.sin(psi) + v * np.cos(psi) + vc_y, u * np.cos(psi) - v * np.sin(psi) + vc_x)
+        d_y = cfg.formation[:, 1]
+        return {
+            "cross_track": c.offset - d_y,
+            "heading_deg": np.degrees(wrap_angle(course - (psi - c.beta))),  # χ − γ(ℓ)
+            "spread": np.ptp(c.ell - cfg.formation[:, 0], axis=1),
+            "speed": (1.0 - c.kappa * d_y) * (c.ell_dot - traj.u_d[:, None]),
+        }
     theta = s[..., X] - cfg.formation[:, 0]
     return {
         "cross_track": s[..., Y] - cfg.formation[:, 1],

@@ -8,6 +8,12 @@
     x_j − D_xj − (x_k − D_xk) for every pair (or relative to the mean when
     n > 4), (e) surge speeds u_j and commanded speeds u_cj with u_d(t) and the
     band (U_min, U_max).
+
+On a curved path (docs/paths.md) the panels are in path coordinates: (a)
+draws the path and the lanes with equal axes, (b) the cross-track errors
+e_j, (c) the course over ground relative to the path's tangent, (d) the
+coordination errors of θ_j = ℓ_j − D_xj, and (e) adds each vessel's lane
+speed (1 − κ·D_yj)·u_d (thin dashed).
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.metrics import path_coordinates_along
 from baselines.rollout import Trajectory
 from marine_formation_env.atomic import atomic_path
 from marine_formation_env.dynamics import wrap_angle
@@ -27,7 +34,10 @@ __all__ = ["plot_comparison", "plot_episode", "save_figure"]
 
 
 def _snapshot_indices(t: np.ndarray, count: int = 6) -> np.ndarray:
-    marks = np.array([0.0, 20.0, 50.0, 100.0, 200.0, t[-1]])[:count]
+    if t[-1] > 600.0:  # a long run (a survey): instants spread over it
+        marks = np.linspace(0.0, t[-1], 7)
+    else:
+        marks = np.array([0.0, 20.0, 50.0, 100.0, 200.0, t[-1]])[:count]
     marks = marks[marks <= t[-1]]
     return np.unique(np.searchsorted(t, marks).clip(0, len(t) - 1))
 
@@ -48,6 +58,52 @@ def save_figure(fig: Any, path: str | Path) -> None:
         fig.savefig(tmp)
 
 
+def _path_view(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
+    """What the panels show: errors, θ and labels, in path coordinates on a curved path."""
+    s = traj.state
+    offsets = cfg.formation
+    if cfg.straight:
+        return {
+            "e": s[..., 1] - offsets[:, 1],
+            "heading": np.degrees(wrap_angle(s[..., 2])),
+            "theta": s[..., 0] - offsets[:, 0],
+            "lane_speed": None,
+            "e_label": "y_j − D_yj [m]",
+            "heading_label": "ψ_j [deg]",
+            "heading_title": "(c) headings",
+            "theta_label": "x",
+        }
+    c = path_coordinates_along(traj, cfg)
+    psi, u, v = s[..., 2], s[..., 3], s[..., 4]
+    return {
+        "e": c.offset - offsets[:, 1],
+        "heading": np.degrees(wrap_angle(psi + np.arctan2(v, u) - (psi - c.beta))),
+        "theta": c.ell - offsets[:, 0],
+        "lane_speed": (1.0 - c.kappa * offsets[:, 1]) * traj.u_d[:, None],
+        "e_label": "e_j [m]",
+        "heading_label": "χ_j − γ(ℓ_j) [deg]",
+        "heading_title": "(c) course over ground relative to the path",
+        "theta_label": "ℓ",
+    }
+
+
+def _draw_lanes(ax: Any, traj: Trajectory, cfg: ScenarioConfig, lw: float = 0.8) -> None:
+    """The desired paths: lines y = D_yj, or the path (grey) and its lanes along the stretch the run covers."""
+    offsets = cfg.formation
+    if cfg.straight:
+        for j in range(cfg.n_vessels):
+            ax.axhline(offsets[j, 1], color=vessel_color(j), ls="--", lw=lw, alpha=0.6)
+        return
+    ell = cfg.path.closest(traj.state[[0, -1], :, 0], traj.state[[0, -1], :, 1])
+    lo, hi = float(ell.min()) - 100.0, float(ell.max()) + 100.0
+    route = cfg.path.points(lo, hi)
+    ax.plot(route[:, 0], route[:, 1], color="0.55", lw=lw, ls="-", alpha=0.8, label="path")
+    for j in range(cfg.n_vessels):
+        lane = cfg.path.points(lo, hi, offset=float(offsets[j, 1]))
+        ax.plot(lane[:, 0], lane[:, 1], color=vessel_color(j), ls="--", lw=lw, alpha=0.6)
+    ax.set_aspect("equal", adjustable="datalim")
+
+
 def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None = None, title: str = "") -> Any:
     """Draw the Fig. 6 panels for ``traj`` and save to ``path`` (PNG/PDF/SVG) if given.
 
@@ -60,7 +116,6 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
 
     t, s = traj.t, traj.state
     n = cfg.n_vessels
-    offsets = cfg.formation
     fig = Figure(figsize=(12.0, 11.0), dpi=110)
     FigureCanvasAgg(fig)
     grid = fig.add_gridspec(3, 2, height_ratios=[1.1, 1.0, 1.0])
@@ -70,10 +125,11 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
     ax_coord = fig.add_subplot(grid[2, 0], sharex=ax_ct)
     ax_u = fig.add_subplot(grid[2, 1], sharex=ax_ct)
 
+    view = _path_view(traj, cfg)
     # (a) paths in the plane
+    _draw_lanes(ax_path, traj, cfg)
     for j in range(n):
         color = vessel_color(j)
-        ax_path.axhline(offsets[j, 1], color=color, ls="--", lw=0.8, alpha=0.6)
         ax_path.plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.2, label=f"vessel_{j}")
         for k in _snapshot_indices(t):
             ax_path.plot(
@@ -103,25 +159,25 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
 
     # (b) cross-track errors, (c) heading
     for j in range(n):
-        ax_ct.plot(t, s[:, j, 1] - offsets[j, 1], color=vessel_color(j), lw=1.2)
-        ax_psi.plot(t, np.degrees(wrap_angle(s[:, j, 2])), color=vessel_color(j), lw=1.2)
-    ax_ct.set_ylabel("y_j − D_yj [m]")
+        ax_ct.plot(t, view["e"][:, j], color=vessel_color(j), lw=1.2)
+        ax_psi.plot(t, view["heading"][:, j], color=vessel_color(j), lw=1.2)
+    ax_ct.set_ylabel(view["e_label"])
     ax_ct.set_title("(b) cross-track errors", fontsize=9)
-    ax_psi.set_ylabel("ψ_j [deg]")
-    ax_psi.set_title("(c) headings", fontsize=9)
+    ax_psi.set_ylabel(view["heading_label"])
+    ax_psi.set_title(view["heading_title"], fontsize=9)
 
     # (d) coordination errors
-    theta = s[..., 0] - offsets[:, 0]
+    theta, q = view["theta"], view["theta_label"]
     if n <= 4:
         for j in range(n):
             for k in range(j + 1, n):
                 ax_coord.plot(t, theta[:, j] - theta[:, k], lw=1.2, label=f"{j}−{k}")
-        ax_coord.set_ylabel("(x_j − D_xj) − (x_k − D_xk) [m]")
+        ax_coord.set_ylabel(f"({q}_j − D_xj) − ({q}_k − D_xk) [m]")
         ax_coord.legend(fontsize=7, title="j−k", title_fontsize=7)
     else:
         for j in range(n):
             ax_coord.plot(t, theta[:, j] - theta.mean(axis=1), color=vessel_color(j), lw=1.0)
-        ax_coord.set_ylabel("(x_j − D_xj) − mean_k [m]")
+        ax_coord.set_ylabel(f"({q}_j − D_xj) − mean_k [m]")
     ax_coord.set_title("(d) along-track coordination errors", fontsize=9)
     ax_coord.set_xlabel("t [s]")
 
@@ -130,6 +186,8 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
         ax_u.plot(t, s[:, j, 3], color=vessel_color(j), lw=1.2)
         if np.any(np.isfinite(traj.commanded_speed[:, j])):
             ax_u.step(t[:-1], traj.commanded_speed[:, j], where="post", color=vessel_color(j), lw=0.8, ls=":")
+        if view["lane_speed"] is not None:
+            ax_u.plot(t, view["lane_speed"][:, j], color=vessel_color(j), lw=0.6, ls="--", alpha=0.7)
     ax_u.plot(t, traj.u_d, color="k", lw=0.8, ls="--", label="u_d")
     for bound in (cfg.u_min, cfg.u_max):
         ax_u.axhline(bound, color="0.5", lw=0.8, ls="-.")
@@ -162,16 +220,16 @@ def plot_comparison(
     fig = Figure(figsize=(4.6 * cols, 11.0), dpi=100)
     FigureCanvasAgg(fig)
     axes = fig.subplots(4, cols, squeeze=False, sharey="row")
-    offsets = cfg.formation
     for c, label in enumerate(labels):
         traj = trajectories[label]
         t, s = traj.t, traj.state
-        theta = s[..., 0] - offsets[:, 0]
+        view = _path_view(traj, cfg)
+        theta = view["theta"]
+        _draw_lanes(axes[0, c], traj, cfg, lw=0.7)
         for j in range(cfg.n_vessels):
             color = vessel_color(j)
-            axes[0, c].axhline(offsets[j, 1], color=color, ls="--", lw=0.7, alpha=0.6)
             axes[0, c].plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.1)
-            axes[1, c].plot(t, s[:, j, 1] - offsets[j, 1], color=color, lw=1.1)
+            axes[1, c].plot(t, view["e"][:, j], color=color, lw=1.1)
             axes[2, c].plot(t, theta[:, j] - theta.mean(axis=1), color=color, lw=1.1)
             axes[3, c].plot(t, s[:, j, 3], color=color, lw=1.1)
             if np.any(np.isfinite(traj.commanded_speed[:, j])):
@@ -187,7 +245,7 @@ def plot_comparison(
         for r in range(4):
             axes[r, c].grid(alpha=0.3)
     axes[0, 0].set_ylabel("y [m]")
-    axes[1, 0].set_ylabel("y_j − D_yj [m]")
+    axes[1, 0].set_ylabel("y_j − D_yj [m]" if cfg.straight else "e_j [m]")
     axes[2, 0].set_ylabel("θ_j − mean θ [m]")
     axes[3, 0].set_ylabel("u_j, u_cj (dotted) [m/s]")
     return _finish(fig, cfg, path, title)

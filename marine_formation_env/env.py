@@ -33,7 +33,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     others: vessel ``j`` receives ``(x_i, ẋ_i)`` only from ``i ∈ A_j``. Agents
     are ``vessel_0 … vessel_{n−1}``; all share one observation and one action
     space (parameter sharing). The default scenario ``paper`` is the paper's
-    Section V (docs/model.md §5).
+    Section V (docs/model.md §5). The path can also be curved (a circle, a
+    waypoint route, a lawnmower survey: "Paths" below); the paper's straight
+    lines are the default and its special case.
 
     ## Action Space
 
@@ -61,7 +63,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     Maps are affine: ``u_c = U_min + (a+1)/2·(U_max − U_min)``, ``τ = a·τ_max``,
     ``ψ_d = a·psi_max``. At `guidance` the surge law (11) and a heading loop
-    (14 with ψ_d in place of ψ_LOS, and 13) track ``(u_c, ψ_d)``; at `speed` the
+    (14 with ψ_d in place of ψ_LOS, and 13) track ``(u_c, ψ_d)`` (on a curved
+    path ψ_d is relative to the path's tangent at the vessel); at `speed` the
     paper's LOS path follower (11)-(14) steers and tracks ``u_c``, so the policy
     does the coordination (20). Defaults: tau_u_max = 3 m/s², tau_r_max =
     2 rad/s² (the paper's gains need up to 2.43 m/s² and 1.82 rad/s² in the
@@ -69,7 +72,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     ## Observation Space
 
-    ``Box(low, high, (7 + 4·(n−1),), float32)`` per agent; own quantities
+    ``Box(low, high, (10 + 4·(n−1),), float32)`` per agent; own quantities
     first, then one 4-entry slot per other vessel ``i = (j + k + 1) mod n``,
     ``k = 0 … n−2``. Slot entries are zero when ``i ∉ A_j``. The bounds are
     finite (``FormationCore.observation_space`` documents each): the workspace
@@ -85,10 +88,18 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | 4         | yaw rate r_j                             | rad/s  | −1       | 1       |
     | 5         | desired formation speed u_d(t)           | m/s    | U_min    | U_max   |
     | 6         | its rate u̇_d(t)                          | m/s²   | −ρ       | ρ       |
-    | 7 + 4k    | link bit: 1 iff i transmits to j (now)   | –      | 0        | 1       |
-    | 8 + 4k    | (x_j − D_xj) − (x_i − D_xi)              | m      | −X       | X       |
-    | 9 + 4k    | ẋ_j − ẋ_i                                | m/s    | −39.6    | 39.6    |
-    | 10 + 4k   | age of the received data (0: ideal link) | s      | 0        | horizon |
+    | 7         | path curvature κ(ℓ_j) at the vessel      | 1/m    | −K       | K       |
+    | 8         | path curvature κ(ℓ_j + 100 m), ahead     | 1/m    | −K       | K       |
+    | 9         | the vessel's lane offset D_yj            | m      | −D       | D       |
+    | 10 + 4k   | link bit: 1 iff i transmits to j (now)   | –      | 0        | 1       |
+    | 11 + 4k   | (x_j − D_xj) − (x_i − D_xi)              | m      | −X       | X       |
+    | 12 + 4k   | ẋ_j − ẋ_i                                | m/s    | −39.6    | 39.6    |
+    | 13 + 4k   | age of the received data (0: ideal link) | s      | 0        | horizon |
+
+    On a curved path the same entries are in path coordinates ("Paths"):
+    index 0 is ``e_j``, 1 the heading relative to the path ``β_j = ψ_j − γ(ℓ_j)``,
+    and the slots hold ``θ_j − θ_i`` with ``θ = ℓ − D_x`` and ``ℓ̇_j − ℓ̇_i``. On
+    the straight path 7 and 8 are 0.
 
     Over a non-ideal channel (next section) ``x_i`` and ``ẋ_i`` are those of
     the last message received from ``i``, sent ``age`` seconds ago, and the
@@ -97,7 +108,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     Y = workspace y-extent + max |D_y|; X = workspace x-length + spread of D_x;
     ρ = max(2π·amplitude/period of u_d, 0.1); 14 m/s and 1 rad/s are the
-    defaults of ``max_speed`` and ``max_yaw_rate`` (39.6 = 2√2·14).
+    defaults of ``max_speed`` and ``max_yaw_rate`` (39.6 = 2√2·14);
+    K = max(0.01, 1/smallest radius of the path); D = max(1 m, max |D_y|). On a
+    curved path Y is the ``corridor``.
 
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
     ``(x_i, ẋ_i)`` (docs/model.md §3), given relative to ``j``. ``state()`` returns the
@@ -122,6 +135,34 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     the reset seed (or ``options={"channel_seed": k}``). With the defaults
     nothing of this runs.
 
+    ## Paths
+
+    ``path=`` (:mod:`marine_formation_env.paths`; docs/paths.md) sets the
+    reference path ``P(ℓ)``, ``ℓ`` its arc length, with tangent angle ``γ(ℓ)``
+    and curvature ``κ(ℓ)``: a path object, a kind name, or a mapping with
+    ``kind`` (``{"kind": "circle", "radius": 400.0}``; a mapping without
+    ``kind`` updates the scenario's path; ``--set path.radius=500`` on the
+    command line). Kinds: ``straight`` (default, ``P(ℓ) = (ℓ, 0)``), ``circle``
+    (radius, turn), ``waypoints`` (legs joined by arcs of ``turn_radius``),
+    ``lawnmower`` (legs, leg_length, spacing, turn_radius, first_turn).
+    Vessel ``j`` follows the lane ``P(ℓ) + D_yj·n(ℓ)``, ``n = (−sin γ, cos γ)``.
+    Its path coordinates: the projection ``ℓ_j`` (followed continuously: a
+    global search at reset, Newton steps after every RK4 step), ``e_j = (p_j −
+    P(ℓ_j))·n − D_yj``, ``β_j = ψ_j − γ(ℓ_j)``, ``θ_j = ℓ_j − D_xj`` and
+    ``ℓ̇_j = (u cos β − v sin β)/(1 − κ·(D_yj + e_j))``; on the straight path
+    they are ``x_j``, ``y_j − D_yj``, ``ψ_j``, ``x_j − D_xj``, ``ẋ_j``. What
+    vessels transmit is ``(ℓ_i, ℓ̇_i)``. The built-in LOS (`speed`) steers to
+    ``γ(ℓ) − atan(e/Δ)`` less the crab angle of steady turning; the reference
+    commands the lane's surge speed (the outer vessel of a turn goes faster).
+    A path and formation that break the generalized assumption (19), every
+    ``(1 − κ·D_yj)·(u_d ± a)`` inside [U_min, U_max], are refused (naming the
+    lane, the radius and the band); so are waypoints that a ``turn_radius``
+    cannot join. Presets: ``circle`` (the paper's formation on a circle of
+    300 m, the smallest radius (19) admits), ``survey`` (a lawnmower of 4 legs
+    of 2 km, 600 m apart, turns of 300 m; horizon 2000 s) and
+    ``survey_acoustic`` (that route over ``acoustic`` links). On a curved path
+    the core runs its numpy step (the compiled kernel covers the straight path).
+
     ## Rewards
 
     Per vessel and step, with ``c(e; σ) = (e/σ)²/(1 + (e/σ)²) ∈ [0, 1)`` and
@@ -133,7 +174,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     ``ẋ_j = u_j cos ψ_j − v_j sin ψ_j`` is the along-path speed through the
     water (with a current the vessel is carried on top of it; the rewards, like
-    the paper's goals, ask for u_d relative to the water). Weights and scales
+    the paper's goals, ask for u_d relative to the water). On a curved path the
+    terms take ``e_j``, ``β_j``, ``θ_j = ℓ_j − D_xj`` and ``ℓ̇_j`` in place of
+    ``y_j − D_yj``, ``ψ_j``, ``x_j − D_xj`` and ``ẋ_j`` (a vessel crabbing
+    through a turn pays a small heading cost). Weights and scales
     are ``reward=RewardConfig(...)`` fields. If the
     formation terminates early, every vessel also receives
     ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
@@ -148,7 +192,11 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ``init_noise`` (x, y [m], ψ [rad], u [m/s]); ``paper``: exactly docs/model.md §5,
     ``(x, y, ψ, u, v, r)`` = (−50, 20, 0, 3, 0, 0), (−60, 30, 0.3, 3, 0, 0),
     (−120, −10, −0.2, 3, 0, 0). ``reset(options={"initial_state": (n, 6)})``
-    sets it exactly. A start that would end the episode before the first
+    sets it exactly (inertial columns). A scenario's ``initial_state`` is
+    written in the path's frame (arc length, offset along the normal, heading
+    relative to the tangent, u, v, r), the inertial frame on the straight path;
+    the curved presets carry the paper's initial state onto their path. A
+    start that would end the episode before the first
     decision (a vessel outside the workspace or the speed/yaw-rate envelope,
     or two vessels closer than ``safety_distance``) is refused, at
     construction for the scenario's own initial state (with its noise) and at
@@ -165,7 +213,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
       state makes vessel_0 and vessel_1 cross paths 0.5 m apart under the
       paper's controller, which does not consider collisions), a vessel
       outside ``workspace`` (default: a box holding the whole nominal run with
-      500 m / 250 m margins), a vessel outside the envelope |u|, |v| ≤
+      500 m / 250 m margins; on a curved path: around the route), on a
+      curved path a vessel more than ``corridor`` from its lane (|e_j| >
+      corridor; default half the room between the outermost lane and the
+      tightest centre of curvature, at most 250 m), a vessel outside the envelope |u|, |v| ≤
       max_speed (14 m/s), |r| ≤ max_yaw_rate (1 rad/s), or a non-finite state
       (``infos[agent]["out_of_bounds"]``).
     * Truncation: after ``round(horizon/dt)`` steps (400 s: 800 steps at the
@@ -198,6 +249,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `current`          | still water          | `Current(speed, direction, amplitude, period)` or mapping  |
     | `sensor_noise`     | none                 | `SensorNoise(position, heading, speed, yaw_rate)` std devs |
     | `los_integral_gain`| 0 (plain LOS)        | σ [m/s]: integral LOS in the `speed` level's path follower |
+    | `path`             | `"straight"`         | `Path`, kind name or mapping with `kind` ("Paths")         |
+    | `corridor`         | derived (curved)     | largest abs(e_j) [m] on a curved path before termination |
 
     A mapping given for a nested setting updates the scenario's value field
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
@@ -213,6 +266,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
       Since 0.3.0, input that used to be accepted silently is refused
       (initial states that end the episode at once, float seeds, schedule
       dwells that are not whole control periods); valid input behaves as before.
+    * v1 (0.3.0): curved paths (``path=``). The own part of the observation has
+      10 entries (was 7): the path's curvature at the vessel and 100 m ahead
+      and the lane offset D_yj follow u̇_d, so the slots start at index 10. Every
+      other value, and every state and reward on the straight path, is as in v0.
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 - the class default; each env sets its own render_fps

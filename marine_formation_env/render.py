@@ -1,10 +1,13 @@
 """Rendering with matplotlib (imported lazily; ``pip install marine-formation-env[plot]``).
 
-A fixed world camera shows the scenario's workspace box with:
+A fixed world camera shows the scenario's workspace box (on a curved path:
+the whole route, docs/paths.md) with:
 
-* the desired paths ``y = D_yj`` (dashed),
+* the desired paths ``y = D_yj`` (dashed); on a curved path, the path (grey)
+  and the lanes ``P(ℓ) + D_yj·n(ℓ)`` (dashed),
 * the formation slots ``(x̄ + D_xj, D_yj)`` around the current mean along-track
-  position ``x̄ = mean_k(x_k − D_xk)`` (hollow circles),
+  position ``x̄ = mean_k(x_k − D_xk)`` (hollow circles); on a curved path the
+  slots ``P(θ̄ + D_xj) + D_yj·n`` around ``θ̄ = mean_k(ℓ_k − D_xk)``,
 * each vessel as an oriented hull polygon at true scale,
 * every communication link as an arrow from transmitter to receiver; over a
   non-ideal channel, links that exist in the graph but are down right now
@@ -80,6 +83,32 @@ def hull_polygon(x: float, y: float, psi: float, length: float, beam: float) -> 
     return body @ np.array([[c, s], [-s, c]]) + np.array([x, y])
 
 
+def route_span(config: ScenarioConfig) -> tuple[float, float]:
+    """The stretch ``(ℓ_from, ℓ_to)`` [m] of a curved path the camera shows: from behind the start to past the end.
+
+    A path without an end (a circle) is shown over one lap.
+    """
+    start = config.path.closest(config.start_state[:, 0], config.start_state[:, 1])
+    lo = float(np.min(start)) - 100.0
+    length = config.path.length
+    if not np.isfinite(length):
+        return lo, lo + 2.0 * np.pi * config.path.min_radius
+    return lo, max(length, float(np.max(start))) + 200.0
+
+
+def route_box(config: ScenarioConfig) -> tuple[float, float, float, float]:
+    """``(x_min, x_max, y_min, y_max)`` [m]: the route of :func:`route_span` with its lanes and a margin."""
+    lo, hi = route_span(config)
+    points = config.path.points(lo, hi)
+    margin = float(np.max(np.abs(config.formation[:, 1]))) + 100.0
+    return (
+        float(points[:, 0].min()) - margin,
+        float(points[:, 0].max()) + margin,
+        float(points[:, 1].min()) - margin,
+        float(points[:, 1].max()) + margin,
+    )
+
+
 def vessel_color(j: int) -> str:
     """A stable color per vessel index."""
     return VESSEL_COLORS[j % len(VESSEL_COLORS)]
@@ -109,7 +138,8 @@ class FormationRenderer:
         self.human = human
         self.zoom_width = float(zoom_width)
         self._trail: list[np.ndarray] = []
-        x_lo, x_hi, y_lo, y_hi = config.workspace
+        self._arc: np.ndarray | None = None  # the vessels' projections on a curved path, followed frame to frame
+        x_lo, x_hi, y_lo, y_hi = config.workspace if config.straight else route_box(config)
         width_in = width_px / 100.0
         world_h = float(np.clip(width_in * (y_hi - y_lo) / (x_hi - x_lo), 1.6, 0.5 * width_in))
         zoom_h = 0.3 * width_in
@@ -140,7 +170,13 @@ class FormationRenderer:
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title("close-up: hulls to scale, formation slots (circles), links i → j (arrows)", fontsize=8)
-        self._place_zoom(np.column_stack([config.formation, np.zeros((config.n_vessels, 4))]))
+        start = config.start_state if not config.straight else None
+        if start is not None:
+            self._trail = [np.array(start[:, :2])]
+        self._place_zoom(
+            None if start is not None else np.column_stack([config.formation, np.zeros((config.n_vessels, 4))])
+        )
+        self._trail = []
         self.fig.tight_layout()  # once: the layout does not change from frame to frame
         # what moves is drawn over a cached background (blitting): the world panel's moving artists
         # and title, and the whole close-up (its limits, hence its ticks, change every frame)
@@ -156,9 +192,17 @@ class FormationRenderer:
         cfg = self.config
         length = cfg.params.length or 40.0
         scene: dict[str, list[Any]] = {"slots": [], "hulls": [], "trails": [], "arrows": [], "labels": []}
+        if not cfg.straight:
+            lo, hi = route_span(cfg)
+            route = cfg.path.points(lo, hi)
+            ax.plot(route[:, 0], route[:, 1], color="0.6", lw=0.8)
         for j, (d_x, d_y) in enumerate(cfg.formation):
             color = vessel_color(j)
-            ax.axhline(d_y, color=color, lw=0.8, ls="--", alpha=0.5)
+            if cfg.straight:
+                ax.axhline(d_y, color=color, lw=0.8, ls="--", alpha=0.5)
+            else:
+                lane = cfg.path.points(lo, hi, offset=float(d_y))
+                ax.plot(lane[:, 0], lane[:, 1], color=color, lw=0.8, ls="--", alpha=0.5)
             scene["slots"].append(ax.add_patch(Circle((d_x, d_y), 0.4 * length, fill=False, ec=color, lw=1.0)))
             (trail,) = ax.plot([], [], color=color, lw=0.8, alpha=trail_alpha)
             scene["trails"].append(trail)
@@ -199,19 +243,30 @@ class FormationRenderer:
         self._trail.append(np.array(state[:, :2]))
         trail = np.stack(self._trail)  # (T, n, 2)
         offsets = cfg.formation
-        spread = float(np.ptp(state[:, 0] - offsets[:, 0]))
-        cross = float(np.max(np.abs(state[:, 1] - offsets[:, 1])))
+        if cfg.straight:
+            theta, cross_track, slots = state[:, 0] - offsets[:, 0], state[:, 1] - offsets[:, 1], None
+        else:
+            if time == 0.0 or self._arc is None:
+                self._arc = cfg.path.closest(state[:, 0], state[:, 1])
+            self._arc = cfg.path.project(state[:, 0], state[:, 1], self._arc)
+            px, py, gamma, _ = cfg.path.frame(self._arc)
+            offset = (state[:, 1] - py) * np.cos(gamma) - (state[:, 0] - px) * np.sin(gamma)
+            theta, cross_track = self._arc - offsets[:, 0], offset - offsets[:, 1]
+            sx, sy, sg, _ = cfg.path.frame(float(np.mean(theta)) + offsets[:, 0])
+            slots = np.column_stack([sx - offsets[:, 1] * np.sin(sg), sy + offsets[:, 1] * np.cos(sg)])
+        spread = float(np.ptp(theta))
+        cross = float(np.max(np.abs(cross_track)))
         for scene in (self._world, self._zoom):
-            self._move_scene(scene, state, trail, links)
+            self._move_scene(scene, state, trail, links, slots)
         sea = ""
         if not cfg.current.is_zero:
             vc_x, vc_y = cfg.current.velocity(time)
             sea = f"   current {float(np.hypot(vc_x, vc_y)):.2f} m/s towards {np.degrees(cfg.current.direction):.0f}°"
         self._title.set_text(
             f"{cfg.name} ({cfg.action_level})   t = {time:6.1f} s   coordination spread {spread:8.2f} m   "
-            f"max |y − D_y| {cross:7.2f} m{sea}"
+            f"max |{'y − D_y' if cfg.straight else 'e'}| {cross:7.2f} m{sea}"
         )
-        self._place_zoom(state)
+        self._place_zoom(state if cfg.straight else None)
         canvas = self.fig.canvas
         if self._background is None:
             self.ax_zoom.set_visible(False)
@@ -231,15 +286,22 @@ class FormationRenderer:
         return np.array(even_frame(rgba)[..., :3])
 
     def _move_scene(
-        self, scene: dict[str, list[Any]], state: np.ndarray, trail: np.ndarray, links: np.ndarray | None
+        self,
+        scene: dict[str, list[Any]],
+        state: np.ndarray,
+        trail: np.ndarray,
+        links: np.ndarray | None,
+        slots: np.ndarray | None = None,
     ) -> None:
+        """Move one panel's artists to ``state``; ``slots`` ``(n, 2)``: the slots' positions (None: straight path)."""
         cfg = self.config
         offsets = cfg.formation
         length = cfg.params.length or 40.0
         beam = cfg.params.beam or 0.25 * length
         x_bar = float(np.mean(state[:, 0] - offsets[:, 0]))
         for j, (x, y, psi, *_rest) in enumerate(state):
-            scene["slots"][j].set_center((x_bar + offsets[j, 0], offsets[j, 1]))
+            centre = (x_bar + offsets[j, 0], offsets[j, 1]) if slots is None else (slots[j, 0], slots[j, 1])
+            scene["slots"][j].set_center(centre)
             scene["hulls"][j].set_xy(hull_polygon(x, y, psi, length, beam))
             scene["trails"][j].set_data(trail[:, j, 0], trail[:, j, 1])
             if scene["labels"]:
@@ -250,11 +312,22 @@ class FormationRenderer:
             arrow.set_color("0.3" if live else "0.75")
             arrow.set_linestyle("-" if live else ":")
 
-    def _place_zoom(self, state: np.ndarray) -> None:
-        """The close-up's window: centred on the formation, wide enough for every vessel and slot."""
+    def _place_zoom(self, state: np.ndarray | None, positions: np.ndarray | None = None) -> None:
+        """The close-up's window: centred on the formation, wide enough for every vessel and slot.
+
+        ``state`` None (a curved path): centred on the vessels of the last frame, whatever their heading.
+        """
         offsets = self.config.formation
-        cx, cy = float(np.mean(state[:, 0])), float(np.mean(offsets[:, 1]))
         ratio = 0.3  # height / width of the close-up window
+        if state is None:
+            points = np.array(self._trail[-1])
+            cx, cy = float(np.mean(points[:, 0])), float(np.mean(points[:, 1]))
+            reach = float(np.max(np.hypot(points[:, 0] - cx, points[:, 1] - cy))) + 0.5 * float(np.ptp(offsets[:, 0]))
+            half_w = max(0.5 * self.zoom_width, 1.2 * reach + 50.0, (1.2 * reach + 40.0) / ratio)
+            self.ax_zoom.set_xlim(cx - half_w, cx + half_w)
+            self.ax_zoom.set_ylim(cy - ratio * half_w, cy + ratio * half_w)
+            return
+        cx, cy = float(np.mean(state[:, 0])), float(np.mean(offsets[:, 1]))
         half_w = max(
             0.5 * self.zoom_width,
             0.6 * float(np.ptp(state[:, 0])) + 50.0,
