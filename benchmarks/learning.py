@@ -62,14 +62,20 @@ def run_benchmark(
     out: Path,
     config_path: Path | None = None,
     progress: bool = True,
+    vessel_steps: int | None = None,
 ) -> dict[str, Any]:
-    """Train for ``minutes`` of wall time at ``level`` and compare with the reference (module docstring)."""
+    """Train for ``minutes`` of wall time at ``level`` and compare with the reference (module docstring).
+
+    ``vessel_steps``: also stop after that many vessel-steps (a budget that does
+    not depend on the machine's load; the wall-clock budget still applies).
+    """
     if level not in ACTION_LEVELS:
         raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
     path = config_path or CONFIG_DIR / f"paper_{level}_ppo.yaml"
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
-    resolved = validate(apply_overrides(load_config(path), {"n_timesteps": 10**9, "eval_freq": 0}))
+    ceiling = 10**9 if vessel_steps is None else int(vessel_steps)
+    resolved = validate(apply_overrides(load_config(path), {"n_timesteps": ceiling, "eval_freq": 0}))
     start = time.perf_counter()
     model = train(
         resolved,
@@ -96,6 +102,7 @@ def run_benchmark(
         "scenario": resolved["scenario"],
         "config": str(path),
         "minutes_budget": minutes,
+        "vessel_steps_budget": vessel_steps,
         "wall_time_s": wall,
         "vessel_steps": int(model.num_timesteps),
         "episodes": episodes,
@@ -144,12 +151,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--config", type=Path, help="training config (default training/configs/paper_<level>_ppo.yaml)")
     parser.add_argument("--out", type=Path, help="run folder (default runs/benchmark_<level>)")
+    parser.add_argument(
+        "--vessel-steps",
+        type=int_at_least(1),
+        default=None,
+        help="also stop after this many vessel-steps (a budget independent of the machine's load)",
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     if not args.minutes > 0:
         parser.error(f"--minutes must be > 0, got {args.minutes}")
     out = args.out or Path("runs") / f"benchmark_{args.level}"
-    report = run_benchmark(args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet)
+    report = run_benchmark(
+        args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet, args.vessel_steps
+    )
     print(format_report(report))
     print(f"written {out / 'benchmark.json'}")
     return 0

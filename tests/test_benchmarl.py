@@ -114,6 +114,10 @@ def test_benchmarl_api_trains_mappo_and_records_its_evaluation_video(tmp_path):
     task = _task("paper_speed", horizon=40.0)  # 80 steps per episode
     experiment = _experiment(tmp_path, MappoConfig, task, evaluation=True)
     experiment.run()
+    # torch's SummaryWriter writes its queue every 10 events or 120 s: the last events of the
+    # run (the video among them) reach the file when it flushes, as tensorboard would find them
+    for logger in experiment.logger.loggers:
+        logger.experiment.flush()
     folder = Path(experiment.folder_name)
     # marl-eval's json: the evaluation returns of both episodes, finite
     report = json.loads(next(folder.glob("*.json")).read_text())
@@ -158,12 +162,12 @@ def test_a_benchmarl_policy_acts_in_the_evaluation_engine_as_in_benchmarl(tmp_pa
     task = _task("paper_speed", horizon=20.0)
     experiment = _experiment(tmp_path, MappoConfig, task, evaluation=False)
     experiment.run()
-    policy = BenchMARLPolicy(experiment.policy, "vessel", 3, 15, 1)
+    policy = BenchMARLPolicy(experiment.policy, "vessel", 3, 18, 1)  # obs dim 10 + 4·2 (MarineFormation-v1)
     env = task.get_env_fun(num_envs=4, continuous_actions=True, seed=7, device="cpu")()
     td = env.reset()
     with torch.no_grad(), set_exploration_type(ExplorationType.DETERMINISTIC):
         expected = experiment.policy(td.clone())["vessel", "action"].numpy()
-    obs = td["vessel", "observation"].numpy().reshape(12, 15)  # the engine's layout: (B·N, dim)
+    obs = td["vessel", "observation"].numpy().reshape(12, 18)  # the engine's layout: (B·N, dim)
     np.testing.assert_allclose(policy.act_batch(obs).reshape(4, 3, 1), expected, rtol=1e-6, atol=1e-7)
     reports, _ = episode_reports(policy, env.config, [0, 1])
     assert all(np.isfinite(r["return"]) for r in reports)

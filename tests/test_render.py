@@ -117,3 +117,27 @@ def test_frames_have_even_height_and_width(workspace):
     canvas = env._rendering._renderer.fig.canvas.get_width_height()  # (W, H) as matplotlib drew it
     assert abs(frame.shape[0] - canvas[1]) <= 1 and frame.shape[1] == canvas[0]  # at most one row cropped
     env.close()
+
+
+@pytest.mark.parametrize("scenario", ["survey", "circle"])
+def test_camera_frames_the_whole_route_and_draws_the_lanes(scenario):
+    """On a curved path the world panel shows every point of the route's lanes (docs/paths.md)."""
+    pytest.importorskip("matplotlib")
+    from marine_formation_env.render import FormationRenderer, route_span
+
+    cfg = marine_formation_env.make_config(scenario)
+    renderer = FormationRenderer(cfg, width_px=640)
+    frame = renderer.draw(cfg.start_state, 0.0)
+    assert frame is not None and frame.shape[0] % 2 == 0 and frame.shape[1] % 2 == 0
+    x_lo, x_hi = renderer.ax_world.get_xlim()
+    y_lo, y_hi = renderer.ax_world.get_ylim()
+    lo, hi = route_span(cfg)
+    for d_y in cfg.formation[:, 1]:
+        lane = cfg.path.points(lo, hi, offset=float(d_y))
+        assert np.all((lane[:, 0] >= x_lo) & (lane[:, 0] <= x_hi) & (lane[:, 1] >= y_lo) & (lane[:, 1] <= y_hi))
+    # the lanes are drawn as lines in the world panel (the path plus one per vessel)
+    assert len(renderer.ax_world.lines) >= 1 + cfg.n_vessels
+    if np.isfinite(cfg.path.length):  # a route: the camera shows its end too
+        end_x, end_y, _, _ = cfg.path.frame(cfg.path.length)
+        assert x_lo <= end_x <= x_hi and y_lo <= end_y <= y_hi
+    renderer.close()

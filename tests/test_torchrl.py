@@ -27,7 +27,7 @@ SCENARIO = {"n_vessels": 4, "topology": "ring"}  # random initial states: the se
 LOSSY = {"burst": {"p_good_to_bad": 0.3, "p_bad_to_good": 0.4, "loss_bad": 0.9}, "latency": 0.2, "jitter": 0.3}
 
 
-@pytest.mark.parametrize("scenario", ["paper", "acoustic"])
+@pytest.mark.parametrize("scenario", ["paper", "acoustic", "survey_acoustic"])
 @pytest.mark.parametrize("level", LEVELS)
 def test_check_env_specs_at_every_level_with_and_without_a_channel(level, scenario):
     env = MarineFormationTorchEnv(num_envs=3, scenario=scenario, action_level=level)
