@@ -17,6 +17,7 @@ task               scenario
 ``paper_force``     the paper's scenario, surge force and yaw moment
 ``acoustic_speed``  the paper's team over the lossy, delayed acoustic channel
 ``ring6_speed``     six vessels on a directed ring, speed commands
+``survey_speed``    the paper's team on a lawnmower survey (docs/paths.md), speed commands
 =================  ==========================================================
 
 Install (BenchMARL 1.5 needs TorchRL 0.10–0.11, so this extra cannot share a
@@ -169,6 +170,7 @@ class MarineFormationTask(Task):
     PAPER_FORCE = None
     ACOUSTIC_SPEED = None
     RING6_SPEED = None
+    SURVEY_SPEED = None
 
     @staticmethod
     def associated_class() -> type[TaskClass]:

@@ -25,7 +25,7 @@ from marine_formation_env.benchmarl import ENV_NAME, MarineFormationTask
 from marine_formation_env.errors import ConfigError
 from marine_formation_env.scenarios import make_config
 
-TASKS = ["paper_speed", "paper_guidance", "paper_force", "acoustic_speed", "ring6_speed"]
+TASKS = ["paper_speed", "paper_guidance", "paper_force", "acoustic_speed", "ring6_speed", "survey_speed"]
 
 
 def _small_experiment_config(folder: Path, evaluation: bool) -> ExperimentConfig:
