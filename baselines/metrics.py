@@ -15,7 +15,8 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   relative to the path's tangent, χ_j − γ(ℓ_j) (a vessel on its lane crabs
   into the turn, so its heading cannot be the tangent's); θ_j = ℓ_j − D_xj;
   speed error: the vessel's speed along its lane minus the lane's speed,
-  (1 − κ·D_yj)·(ℓ̇_j − u_d), in m/s along the lane;
+  (1 − κ·D_yj)·(ℓ̇_j − u_d), in m/s along the lane, with ℓ̇_j through the water
+  (as u_j − u_d on the straight path);
 * settling time: the earliest time after which, until the end of the episode,
   max |e_j| ≤ 0.5 m, max |ψ_j| ≤ 0.5°, the spread ≤ 0.5 m and
   max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
@@ -40,7 +41,15 @@ from marine_formation_env.dynamics import PSI, U, V, X, Y, wrap_angle
 from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["SETTLING_BANDS", "SUCCESS_BANDS", "episode_metrics", "path_coordinates_along", "settling_time", "summarize"]
+__all__ = [
+    "SETTLING_BANDS",
+    "SUCCESS_BANDS",
+    "episode_metrics",
+    "goal_errors",
+    "path_coordinates_along",
+    "settling_time",
+    "summarize",
+]
 
 #: Tolerances that define "settled": cross-track [m], heading [deg], spread [m], speed [m/s].
 SETTLING_BANDS = {"cross_track": 0.5, "heading_deg": 0.5, "spread": 0.5, "speed": 0.05}
@@ -59,7 +68,7 @@ def _heading(traj: Trajectory, cfg: ScenarioConfig) -> np.ndarray:
 
 
 def path_coordinates_along(traj: Trajectory, cfg: ScenarioConfig) -> PathCoordinates:
-    """Path coordinates ``(T+1, n)`` of a trajectory on a curved path (ℓ̇ over ground with a current).
+    """Path coordinates ``(T+1, n)`` of a trajectory on a curved path (ℓ̇ through the water, as the goals ask).
 
     The projection starts from a global search at the first instant and is
     then followed from one recorded instant to the next (Newton steps from the
@@ -69,11 +78,15 @@ def path_coordinates_along(traj: Trajectory, cfg: ScenarioConfig) -> PathCoordin
     guess = cfg.path.closest(s[0, :, X], s[0, :, Y])
     rows = []
     for k in range(len(s)):
-        current = None if cfg.current.is_zero else cfg.current.velocity(traj.t[k])
-        c = path_coordinates(cfg.path, s[k, :, X], s[k, :, Y], s[k, :, PSI], s[k, :, U], s[k, :, V], guess, current)
+        c = path_coordinates(cfg.path, s[k, :, X], s[k, :, Y], s[k, :, PSI], s[k, :, U], s[k, :, V], guess)
         rows.append(c)
         guess = c.ell
     return PathCoordinates(*(np.stack(column) for column in zip(*rows, strict=True)))
+
+
+def goal_errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:
+    """``(T+1, n)`` errors of goals (7)-(10) (``spread``: ``(T+1,)``) as the module docstring defines them."""
+    return _errors(traj, cfg)
 
 
 def _errors(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, np.ndarray]:

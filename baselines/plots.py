@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from baselines.metrics import path_coordinates_along
+from baselines.metrics import goal_errors, path_coordinates_along
 from baselines.rollout import Trajectory
 from marine_formation_env.atomic import atomic_path
 from marine_formation_env.dynamics import wrap_angle
@@ -74,11 +74,12 @@ def _path_view(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
             "theta_label": "x",
         }
     c = path_coordinates_along(traj, cfg)
-    psi, u, v = s[..., 2], s[..., 3], s[..., 4]
+    errors = goal_errors(traj, cfg)  # the course as the metrics take it (over ground with a current)
     return {
-        "e": c.offset - offsets[:, 1],
-        "heading": np.degrees(wrap_angle(psi + np.arctan2(v, u) - (psi - c.beta))),
+        "e": errors["cross_track"],
+        "heading": errors["heading_deg"],
         "theta": c.ell - offsets[:, 0],
+        "ell": c.ell,
         "lane_speed": (1.0 - c.kappa * offsets[:, 1]) * traj.u_d[:, None],
         "e_label": "e_j [m]",
         "heading_label": "χ_j − γ(ℓ_j) [deg]",
@@ -87,15 +88,17 @@ def _path_view(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
     }
 
 
-def _draw_lanes(ax: Any, traj: Trajectory, cfg: ScenarioConfig, lw: float = 0.8) -> None:
-    """The desired paths: lines y = D_yj, or the path (grey) and its lanes along the stretch the run covers."""
+def _draw_lanes(ax: Any, cfg: ScenarioConfig, ell: np.ndarray | None, lw: float = 0.8) -> None:
+    """The desired paths: lines y = D_yj, or the path (grey) and its lanes along the stretch ``ell`` covers.
+
+    ``ell``: the vessels' projections followed through the run (None on the straight path).
+    """
     offsets = cfg.formation
-    if cfg.straight:
+    if ell is None:
         for j in range(cfg.n_vessels):
             ax.axhline(offsets[j, 1], color=vessel_color(j), ls="--", lw=lw, alpha=0.6)
         return
-    ell = cfg.path.closest(traj.state[[0, -1], :, 0], traj.state[[0, -1], :, 1])
-    lo, hi = float(ell.min()) - 100.0, float(ell.max()) + 100.0
+    lo, hi = float(np.min(ell)) - 100.0, float(np.max(ell)) + 100.0
     route = cfg.path.points(lo, hi)
     ax.plot(route[:, 0], route[:, 1], color="0.55", lw=lw, ls="-", alpha=0.8, label="path")
     for j in range(cfg.n_vessels):
@@ -127,7 +130,7 @@ def plot_episode(traj: Trajectory, cfg: ScenarioConfig, path: str | Path | None 
 
     view = _path_view(traj, cfg)
     # (a) paths in the plane
-    _draw_lanes(ax_path, traj, cfg)
+    _draw_lanes(ax_path, cfg, view.get("ell"))
     for j in range(n):
         color = vessel_color(j)
         ax_path.plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.2, label=f"vessel_{j}")
@@ -225,7 +228,7 @@ def plot_comparison(
         t, s = traj.t, traj.state
         view = _path_view(traj, cfg)
         theta = view["theta"]
-        _draw_lanes(axes[0, c], traj, cfg, lw=0.7)
+        _draw_lanes(axes[0, c], cfg, view.get("ell"), lw=0.7)
         for j in range(cfg.n_vessels):
             color = vessel_color(j)
             axes[0, c].plot(s[:, j, 0], s[:, j, 1], color=color, lw=1.1)

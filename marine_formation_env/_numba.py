@@ -11,9 +11,13 @@ formation's channel instant (sensor noise, links, loss, delays, the held
 messages, the observations through them) on the channel's arrays in place,
 reading the same random rows as :class:`~marine_formation_env.channel.LinkChannel`;
 formations that restart (autoreset) load their initial state instead of
-stepping. :class:`~marine_formation_env.core.FormationCore` uses
-it when numba is installed (``backend="auto"``) and keeps the numpy path as
-the reference implementation; the tests check that both agree.
+stepping. On a curved path (docs/paths.md) the kernel also follows each
+vessel's projection on the path (``paths.segment_project``, Newton from the
+previous value after every RK4 step) and evaluates the loops, observations,
+rewards and the corridor in path coordinates, as the numpy step does.
+:class:`~marine_formation_env.core.FormationCore` uses it when numba is
+installed (``backend="auto"``) and keeps the numpy path as the reference
+implementation; the tests check that both agree.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from numba.extending import register_jitable
 
 from marine_formation_env import channel as channel_module
 from marine_formation_env import control, dynamics, rules
+from marine_formation_env import paths as paths_module
 from marine_formation_env.rules import AGE, COORDINATION, LINK, OWN_SIZE, SLOT_SIZE, VELOCITY
 
 __all__ = ["LEVEL_CODES", "StepKernel", "coefficients", "step_kernel"]
@@ -53,6 +58,15 @@ for _fn in (
     control.heading_yaw_reference,
     control.path_following_inputs,
     control.heading_tracking_inputs,
+    control._sway_coupling,
+    control._sway_damping,
+    control.turn_sway,
+    control.turn_crab,
+    control.path_rates,
+    control.curved_path_following_inputs,
+    control.curved_heading_inputs,
+    paths_module.segment_frame,
+    paths_module.segment_project,
     rules.rk4_combine,
     rules.along_track,
     rules.slot_differences,
@@ -72,6 +86,10 @@ vessel_derivatives = dynamics.vessel_derivatives
 wrap_angle = dynamics.wrap_angle
 path_following_inputs = control.path_following_inputs
 heading_tracking_inputs = control.heading_tracking_inputs
+curved_path_following_inputs = control.curved_path_following_inputs
+curved_heading_inputs = control.curved_heading_inputs
+segment_frame = paths_module.segment_frame
+segment_project = paths_module.segment_project
 rk4_combine = rules.rk4_combine
 along_track = rules.along_track
 slot_differences = rules.slot_differences
@@ -119,6 +137,46 @@ def _derivative(level, p, g, printed, d_y, y, psi, u, v, r, cmd0, cmd1, t, u_c0,
         return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, None, None)
     vc_x, vc_y = current_velocity(c_speed, c_amp, c_omega, c_cos, c_sin, t0 + t)
     return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, vc_x, vc_y)
+
+
+@njit(cache=True, inline="always")
+def _curved_derivative(  # type: ignore[no-untyped-def]
+    level, p, g, s0, sx, sy, sg, sk, guess, steer, x, y, psi, u, v, r, cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea
+):
+    """The closed loop of one vessel on a curved path (``speed``, ``guidance``; ``FormationCore._closed_loop_curved``).
+
+    Its path coordinates come from the stage's position, projected from ``guess`` (the step's start).
+    """
+    t0, c_speed, c_amp, c_omega, c_cos, c_sin = sea
+    ell = segment_project(s0, sx, sy, sg, sk, x, y, guess)
+    px, py, gamma, kappa = segment_frame(s0, sx, sy, sg, sk, ell)
+    offset = (y - py) * math.cos(gamma) - (x - px) * math.sin(gamma)
+    beta = psi - gamma
+    metric = 1.0 - kappa * offset
+    acc = accelerations(p, u, v, r)
+    u_c = u_c0 + u_c_dot * t
+    if level == 1:
+        tau_u, tau_r = curved_heading_inputs(p, g, cmd1, beta, kappa, metric, u, v, r, u_c, u_c_dot, acc)
+    else:
+        tau_u, tau_r = curved_path_following_inputs(
+            p, g, offset - steer, beta, kappa, metric, u, v, r, u_c, u_c_dot, acc
+        )
+    tau_u, tau_r = _clip(tau_u, -tu_max, tu_max), _clip(tau_r, -tr_max, tr_max)
+    if c_speed == 0.0 and c_amp == 0.0:
+        return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, None, None)
+    vc_x, vc_y = current_velocity(c_speed, c_amp, c_omega, c_cos, c_sin, t0 + t)
+    return vessel_derivatives(p, psi, u, v, r, tau_u, tau_r, acc, vc_x, vc_y)
+
+
+@njit(cache=True, inline="always")
+def _path_point(s0, sx, sy, sg, sk, x, y, psi, u, v, guess):  # type: ignore[no-untyped-def]
+    """``(ℓ, e + D_y, β, κ, 1 − κ·d, u cos β − v sin β, cos γ, sin γ)`` of one vessel (``paths.path_coordinates``)."""
+    ell = segment_project(s0, sx, sy, sg, sk, x, y, guess)
+    px, py, gamma, kappa = segment_frame(s0, sx, sy, sg, sk, ell)
+    c, s = math.cos(gamma), math.sin(gamma)
+    offset = (y - py) * c - (x - px) * s
+    beta = psi - gamma
+    return ell, offset, beta, kappa, 1.0 - kappa * offset, u * math.cos(beta) - v * math.sin(beta), c, s
 
 
 @njit(cache=True, inline="always")
@@ -190,6 +248,16 @@ def _kernel(  # type: ignore[no-untyped-def]
     steps,  # (B,) control periods since reset, after this step (0 for restarting formations)
     channel_on,  # the links are not ideal: the channel's functions write the observations
     chan,  # the channel's constants, state and streams (ChannelArgs); placeholders with ideal links
+    curved,  # the path is not the paper's straight line (docs/paths.md)
+    seg_start,  # (K,) the path's segments (Path.segment_arrays)
+    seg_x0,
+    seg_y0,
+    seg_g0,
+    seg_k,
+    arc,  # (B, N) each vessel's projection ℓ on the path, updated in place (curved paths)
+    corridor,  # largest |e| before a vessel is out of bounds (curved paths)
+    lookahead,  # [m] where the observation's curvature ahead is taken
+    pscr,  # (B, N, 4) scratch: e, β, κ, κ ahead (curved paths)
 ):
     n_form, n = state.shape[0], state.shape[1]
     h = dt / substeps
@@ -220,31 +288,65 @@ def _kernel(  # type: ignore[no-untyped-def]
             uc_dot = (c0 - uc0) / dt
             d_y = steer_dy[b, j]
             sea = (time0[b], current[0], current[1], current[2], current[3], current[4])
+            guess = arc[b, j]
             for k in range(substeps):
                 t = k * h
                 hh = 0.5 * h
-                fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max, sea)
-                k1 = _derivative(
-                    level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max, sea
-                )
-                k2 = _stage(fixed, y, psi, u, v, r, k1, hh, t + hh)
-                k3 = _stage(fixed, y, psi, u, v, r, k2, hh, t + hh)
-                k4 = _stage(fixed, y, psi, u, v, r, k3, h, t + h)
+                if curved and level != 0:  # the loops in path coordinates (every stage projects from `guess`)
+                    k1 = _curved_derivative(
+                        level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
+                        x, y, psi, u, v, r, c1, t, uc0, uc_dot, tu_max, tr_max, sea,
+                    )  # fmt: skip
+                    k2 = _curved_derivative(
+                        level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
+                        x + hh * k1[0], y + hh * k1[1], psi + hh * k1[2], u + hh * k1[3], v + hh * k1[4],
+                        r + hh * k1[5], c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
+                    )  # fmt: skip
+                    k3 = _curved_derivative(
+                        level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
+                        x + hh * k2[0], y + hh * k2[1], psi + hh * k2[2], u + hh * k2[3], v + hh * k2[4],
+                        r + hh * k2[5], c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
+                    )  # fmt: skip
+                    k4 = _curved_derivative(
+                        level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
+                        x + h * k3[0], y + h * k3[1], psi + h * k3[2], u + h * k3[3], v + h * k3[4],
+                        r + h * k3[5], c1, t + h, uc0, uc_dot, tu_max, tr_max, sea,
+                    )  # fmt: skip
+                else:
+                    fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max, sea)
+                    k1 = _derivative(
+                        level, p, g, printed, d_y, y, psi, u, v, r, c0, c1, t, uc0, uc_dot, tu_max, tr_max, sea
+                    )
+                    k2 = _stage(fixed, y, psi, u, v, r, k1, hh, t + hh)
+                    k3 = _stage(fixed, y, psi, u, v, r, k2, hh, t + hh)
+                    k4 = _stage(fixed, y, psi, u, v, r, k3, h, t + h)
                 x = rk4_combine(x, k1[0], k2[0], k3[0], k4[0], h)
                 y = rk4_combine(y, k1[1], k2[1], k3[1], k4[1], h)
                 psi = rk4_combine(psi, k1[2], k2[2], k3[2], k4[2], h)
                 u = rk4_combine(u, k1[3], k2[3], k3[3], k4[3], h)
                 v = rk4_combine(v, k1[4], k2[4], k3[4], k4[4], h)
                 r = rk4_combine(r, k1[5], k2[5], k3[5], k4[5], h)
+                if curved:  # follow the projection: Newton from where it was
+                    guess = segment_project(seg_start, seg_x0, seg_y0, seg_g0, seg_k, x, y, guess)
+            arc[b, j] = guess
             state[b, j, 0], state[b, j, 1], state[b, j, 2] = x, y, psi
             state[b, j, 3], state[b, j, 4], state[b, j, 5] = u, v, r
 
         # ---- formation quantities
         theta_mean = 0.0
         for j in range(n):
-            theta[b, j], xdot[b, j] = along_track(
-                state[b, j, 0], offsets[j, 0], state[b, j, 2], state[b, j, 3], state[b, j, 4]
-            )
+            if curved:
+                ell, off, beta, kap, metric, along, _c, _s = _path_point(
+                    seg_start, seg_x0, seg_y0, seg_g0, seg_k,
+                    state[b, j, 0], state[b, j, 1], state[b, j, 2], state[b, j, 3], state[b, j, 4], arc[b, j],
+                )  # fmt: skip
+                theta[b, j], xdot[b, j] = ell - offsets[j, 0], along / metric
+                pscr[b, j, 0], pscr[b, j, 1], pscr[b, j, 2] = off - offsets[j, 1], beta, kap
+                pscr[b, j, 3] = segment_frame(seg_start, seg_x0, seg_y0, seg_g0, seg_k, ell + lookahead)[3]
+            else:
+                theta[b, j], xdot[b, j] = along_track(
+                    state[b, j, 0], offsets[j, 0], state[b, j, 2], state[b, j, 3], state[b, j, 4]
+                )
             theta_mean += theta[b, j]
         theta_mean /= n
         out_of_bounds = False
@@ -258,6 +360,8 @@ def _kernel(  # type: ignore[no-untyped-def]
             for m in range(6):
                 if not np.isfinite(state[b, j, m]):
                     out_of_bounds = True
+            if curved and abs(pscr[b, j, 0]) > corridor:  # far from its lane
+                out_of_bounds = True
             for i in range(j + 1, n):
                 d = np.hypot(sx - state[b, i, 0], sy - state[b, i, 1])
                 min_sep = min(min_sep, d)
@@ -270,11 +374,12 @@ def _kernel(  # type: ignore[no-untyped-def]
         # ---- observations and rewards
         for j in range(n):
             u_j, v_j = state[b, j, 3], state[b, j, 4]
-            e_j = state[b, j, 1] - offsets[j, 1]
             theta_j, xdot_j = theta[b, j], xdot[b, j]
-            psi_w = wrap_angle(state[b, j, 2])
-            # the straight path: no curvature now or ahead; the lane offset D_y
-            own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b], 0.0, 0.0, offsets[j, 1])
+            if curved:
+                e_j, psi_w, kap_j, ahead_j = pscr[b, j, 0], wrap_angle(pscr[b, j, 1]), pscr[b, j, 2], pscr[b, j, 3]
+            else:  # the straight path: no curvature now or ahead
+                e_j, psi_w, kap_j, ahead_j = state[b, j, 1] - offsets[j, 1], wrap_angle(state[b, j, 2]), 0.0, 0.0
+            own = (e_j, psi_w, u_j, v_j, state[b, j, 5], u_d[b], u_d_rate[b], kap_j, ahead_j, offsets[j, 1])
             for f in range(OWN_SIZE if not (channel_on and has_noise) else 0):  # else: from the measurement
                 obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
             for kk in range(n - 1 if not channel_on else 0):
@@ -330,7 +435,29 @@ def _kernel(  # type: ignore[no-untyped-def]
                 )
             if has_noise:  # without noise the measurement is the state, whose theta, xdot the step left
                 _channel_measure(b, state, c_normals, c_npos, c_scale, c_measured, offsets, theta, xdot)
-            if has_current:  # the inertial ẋ carries the current
+            if curved:  # what is transmitted and observed: θ = ℓ − D_x and ℓ̇ over ground of the measurement
+                vc_x, vc_y = 0.0, 0.0
+                if has_current:
+                    vc_x, vc_y = current_velocity(
+                        c_current[0], c_current[1], c_current[2], c_current[3], c_current[4], t1
+                    )
+                for j in range(n):
+                    src = c_measured if has_noise else state
+                    ell, off, beta, kap, metric, along, cg, sg = _path_point(
+                        seg_start, seg_x0, seg_y0, seg_g0, seg_k,
+                        src[b, j, 0], src[b, j, 1], src[b, j, 2], src[b, j, 3], src[b, j, 4], arc[b, j],
+                    )  # fmt: skip
+                    theta[b, j] = ell - offsets[j, 0]
+                    xdot[b, j] = (along + vc_x * cg + vc_y * sg) / metric if has_current else along / metric
+                    if has_noise:  # the own part from the measurement
+                        ahead = segment_frame(seg_start, seg_x0, seg_y0, seg_g0, seg_k, ell + lookahead)[3]
+                        own = (
+                            off - offsets[j, 1], wrap_angle(beta), src[b, j, 3], src[b, j, 4], src[b, j, 5],
+                            u_d[b], u_d_rate[b], kap, ahead, offsets[j, 1],
+                        )  # fmt: skip
+                        for f in range(OWN_SIZE):
+                            obs[b, j, f] = _clip(own[f], obs_low[f], obs_high[f])
+            elif has_current:  # the inertial ẋ carries the current
                 vc_x = current_velocity(c_current[0], c_current[1], c_current[2], c_current[3], c_current[4], t1)[0]
                 for j in range(n):
                     xdot[b, j] += vc_x
@@ -364,7 +491,7 @@ def _kernel(  # type: ignore[no-untyped-def]
             _channel_observe(
                 b,
                 t1,
-                has_noise,
+                has_noise and not curved,  # on a curved path the own part is written above
                 c_measured,
                 offsets,
                 u_d,
@@ -660,7 +787,7 @@ def source_key() -> str:
     compiles a new kernel instead of loading a stale one from the cache.
     """
     digest = hashlib.sha256()
-    for module in (dynamics, control, rules, channel_module):
+    for module in (dynamics, control, rules, channel_module, paths_module):
         digest.update(inspect.getsource(module).encode())
     return digest.hexdigest()[:16]
 
@@ -749,6 +876,15 @@ class StepKernel:
         else:
             self.chan = channel_args(config, channel, sensor_noise, measured, slot_index, obs_low, obs_high)
         self._scratch = (np.empty((num_envs, config.n_vessels)), np.empty((num_envs, config.n_vessels)))
+        self.path = (
+            not config.straight,
+            *config.path.segment_arrays,
+        )
+        self.path_tail = (
+            float(config.corridor) if not config.straight else math.inf,
+            rules.LOOKAHEAD,
+            np.zeros((num_envs, config.n_vessels, 4)),
+        )
 
     def run(
         self,
@@ -762,6 +898,7 @@ class StepKernel:
         actions: np.ndarray,
         restart: np.ndarray,
         initial: np.ndarray,
+        arc: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Advance ``state`` ``(B, N, 6)`` in place by one control period (and the channel, if any).
 
@@ -775,6 +912,8 @@ class StepKernel:
             restart: ``(B,)`` formations that start anew from ``initial`` ``(B, N, 6)``
                 instead of stepping (zero reward, no flags; ``time1`` and
                 ``steps`` are 0 for them; their channel is reset first).
+            arc: ``(B, N)`` the vessels' projections on a curved path (the restarting
+                formations' already those of ``initial``), updated in place.
 
         Returns:
             ``(observation (B, N, D) float32, components (6, B, N), reward (B, N),
@@ -818,6 +957,9 @@ class StepKernel:
             steps,
             self.channel is not None,
             self.chan,
+            *self.path,
+            arc,
+            *self.path_tail,
         )
         return obs, comps, reward, flags
 

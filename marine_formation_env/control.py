@@ -22,6 +22,8 @@ Angles in heading errors are wrapped to ``[−π, π)``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from marine_formation_env.dynamics import accelerations, wrap_angle
@@ -276,10 +278,20 @@ def turn_sway(p: VesselParams, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     X and Y are affine in u (docs/model.md §1), so ``q' = −(X'·Y − X·Y')/Y²``.
     """
-    x, y = p.sway_coupling(u), p.sway_damping(u)
-    x_slope = p.sway_coupling(1.0) - p.sway_coupling(0.0)
-    y_slope = p.sway_damping(1.0) - p.sway_damping(0.0)
-    return -x / y, -(x_slope * y - x * y_slope) / (y * y)  # type: ignore[operator,return-value]
+    x, y = _sway_coupling(p, u), _sway_damping(p, u)
+    x_slope = _sway_coupling(p, 1.0) - _sway_coupling(p, 0.0)
+    y_slope = _sway_damping(p, 1.0) - _sway_damping(p, 0.0)
+    return -x / y, -(x_slope * y - x * y_slope) / (y * y)  # type: ignore[no-any-return]
+
+
+def _sway_coupling(p: VesselParams, u: Any) -> Any:
+    """X(u) of :meth:`VesselParams.sway_coupling`, on the fields only (the compiled kernel's vessel is a tuple)."""
+    return ((p.m23**2 - p.m11 * p.m33) * u + p.m23 * p.d33 - p.m33 * p.d23) / p.lam
+
+
+def _sway_damping(p: VesselParams, u: Any) -> Any:
+    """Y(u) of :meth:`VesselParams.sway_damping`, on the fields only."""
+    return ((p.m22 - p.m11) * p.m23 * u - (p.m33 * p.d22 - p.m23 * p.d32)) / p.lam
 
 
 def lane_speed(
@@ -303,10 +315,13 @@ def lane_speed(
     u = lane
     for _ in range(3):
         sway = turn_sway(p, u)[0] * omega
-        u = lane - sway * sway / (lane + np.sqrt(np.maximum(lane * lane - sway * sway, 0.0)))
+        den = lane + np.sqrt(np.maximum(lane * lane - sway * sway, 0.0))
+        u = lane - sway * sway / np.where(den == 0.0, 1.0, den)  # sway = 0 (a straight part): u = lane exactly
     q, q_slope = turn_sway(p, u)
     den = u + q * q_slope * omega * omega
-    return u, lane_dot * (lane / den) - q * q * omega * omega_dot / den
+    safe = np.where(den == 0.0, 1.0, den)
+    ratio = np.where(den == 0.0, 1.0, lane / safe)  # 1 exactly on a straight part (den = u = lane)
+    return u, lane_dot * ratio - q * q * omega * omega_dot / safe
 
 
 def path_rates(

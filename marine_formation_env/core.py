@@ -42,8 +42,7 @@ paper's straight path are the quantities named first)::
 On a curved path (``not config.straight``) the core also follows each
 vessel's projection ``ℓ_j`` on the path (:attr:`FormationCore.arc`),
 continuously: a global search at reset, then Newton steps from the previous
-value after every RK4 step. The compiled kernel covers the straight path;
-curved paths run the numpy step.
+value after every RK4 step (both backends).
 
 With a non-ideal channel, switching topologies or sensor noise
 (``not config.ideal_observations``), a :class:`~marine_formation_env.channel.LinkChannel`
@@ -198,8 +197,6 @@ class FormationCore:
             raise ValueError(f"num_envs must be an integer ≥ 1, got {num_envs!r}")
         self.backend = resolve_backend(backend)
         self._curved = not config.straight
-        if self._curved:
-            self.backend = "numpy"  # the compiled kernel covers the paper's straight path (module docstring)
         self.config = config
         self.num_envs = int(num_envs)
         self.n = config.n_vessels
@@ -460,8 +457,10 @@ class FormationCore:
             starts[restart_ids] = initial
             self.time[restart_ids] = 0.0
             self.steps[restart_ids] = 0
+            if self._curved:  # a new episode's projections: a global search, as at reset
+                self.arc[restart_ids] = cfg.path.closest(initial[..., X], initial[..., Y])
         obs, comps, reward, flags = self._kernel.run(
-            self.state, cmd, self._last_u_c, time0, steer_dy, self.time, self.steps, actions, restart, starts
+            self.state, cmd, self._last_u_c, time0, steer_dy, self.time, self.steps, actions, restart, starts, self.arc
         )
         components = dict(zip(REWARD_COMPONENTS, comps, strict=True))
         terminated = flags[:, 0] | flags[:, 1]

@@ -160,8 +160,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     cannot join. Presets: ``circle`` (the paper's formation on a circle of
     300 m, the smallest radius (19) admits), ``survey`` (a lawnmower of 4 legs
     of 2 km, 600 m apart, turns of 300 m; horizon 2000 s) and
-    ``survey_acoustic`` (that route over ``acoustic`` links). On a curved path
-    the core runs its numpy step (the compiled kernel covers the straight path).
+    ``survey_acoustic`` (that route over ``acoustic`` links). Both backends
+    run curved paths (the compiled kernel follows the projections too).
 
     ## Rewards
 

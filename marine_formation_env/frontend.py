@@ -329,7 +329,9 @@ class Rendering:
             from marine_formation_env.render import FormationRenderer
 
             self._renderer = FormationRenderer(self.config, human=self.render_mode == "human", width_px=self.width)
-        image: np.ndarray | None = self._renderer.draw(core.state[b], float(core.time[b]), core.links_up(b))
+        image: np.ndarray | None = self._renderer.draw(
+            core.state[b], float(core.time[b]), core.links_up(b), core.arc[b]
+        )
         return image
 
     def close(self) -> None:

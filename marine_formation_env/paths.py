@@ -59,6 +59,8 @@ __all__ = [
     "WaypointPath",
     "make_path",
     "path_coordinates",
+    "segment_frame",
+    "segment_project",
 ]
 
 #: Newton iterations of :meth:`Path.project` (each is exact on a line; on an arc
@@ -125,6 +127,12 @@ class Path:
         """The smallest radius of curvature [m] (``inf`` for a straight path)."""
         k = float(np.max(np.abs(self.segments.kappa)))
         return math.inf if k == 0.0 else 1.0 / k
+
+    @property
+    def segment_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(start, x0, y0, gamma0, kappa)``: the segments as the scalar functions and the kernel take them."""
+        seg = self.segments
+        return tuple(np.ascontiguousarray(a, dtype=float) for a in (seg.start, seg.x0, seg.y0, seg.gamma0, seg.kappa))  # type: ignore[return-value]
 
     def to_dict(self) -> dict[str, Any]:
         """``{"kind": …, field: value, …}``: what :func:`make_path` takes back."""
@@ -229,6 +237,11 @@ class Path:
         return np.column_stack([x - offset * np.sin(gamma), y + offset * np.cos(gamma)])
 
 
+def _point(p: np.ndarray) -> tuple[float, float]:
+    """A waypoint as plain floats (for messages)."""
+    return (float(p[0]), float(p[1]))
+
+
 def _chain(pieces: list[tuple[float, float]], x0: float = 0.0, y0: float = 0.0, gamma0: float = 0.0) -> Segments:
     """Segments from ``(length, curvature)`` pieces laid end to end from ``(x0, y0)`` heading ``gamma0``."""
     starts, xs, ys, gammas, kappas, lengths = [], [], [], [], [], []
@@ -322,7 +335,7 @@ class WaypointPath(Path):
         for k, length in enumerate(lengths):
             if length == 0.0:
                 raise ConfigError(
-                    f"path.waypoints {k} and {k + 1} coincide at {tuple(points[k])}: a leg needs a length"
+                    f"path.waypoints {k} and {k + 1} coincide at {_point(points[k])}: a leg needs a length"
                 )
         headings = np.arctan2(legs[:, 1], legs[:, 0])
         turns = np.mod(np.diff(headings) + math.pi, 2.0 * math.pi) - math.pi
@@ -330,7 +343,7 @@ class WaypointPath(Path):
         for k, turn in enumerate(turns):
             if abs(abs(turn) - math.pi) < 1e-9:
                 raise ConfigError(
-                    f"path.waypoints turn back on themselves at waypoint {k + 1} {tuple(points[k + 1])}: a 180° "
+                    f"path.waypoints turn back on themselves at waypoint {k + 1} {_point(points[k + 1])}: a 180° "
                     "corner cannot be rounded by one arc (put two waypoints, at least 2·turn_radius apart, across it)"
                 )
         tangent = np.concatenate([[0.0], radius * np.tan(np.abs(turns) / 2.0), [0.0]])
@@ -339,14 +352,14 @@ class WaypointPath(Path):
             straight = length - tangent[k] - tangent[k + 1]
             if straight < -1e-9 * max(1.0, length):
                 raise ConfigError(
-                    f"path.waypoints: leg {k} from {tuple(points[k])} to {tuple(points[k + 1])} is {length:g} m "
+                    f"path.waypoints: leg {k} from {_point(points[k])} to {_point(points[k + 1])} is {length:g} m "
                     f"long, but the turns at its ends need {tangent[k]:g} m + {tangent[k + 1]:g} m of it at "
                     f"turn_radius = {radius:g} m (reduce turn_radius or move the waypoints apart)"
                 )
             if k == len(lengths) - 1:
                 pieces.append((math.inf, 0.0))
-            elif straight > 0.0:
-                pieces.append((float(straight), 0.0))
+            elif straight > 0.0 or k == 0:  # the first leg always: before the start the path runs along it
+                pieces.append((max(float(straight), 0.0), 0.0))
             if k < len(turns) and turns[k] != 0.0:
                 pieces.append((radius * abs(float(turns[k])), math.copysign(1.0 / radius, float(turns[k]))))
         segments = _chain(pieces, float(points[0, 0]), float(points[0, 1]), float(headings[0]))
@@ -391,6 +404,7 @@ class LawnmowerPath(Path):
                 f"path.spacing = {self.spacing:g} m is less than 2·turn_radius = {2 * self.turn_radius:g} m: the "
                 "turn between two legs cannot be flown at that radius"
             )
+        object.__setattr__(self, "legs", int(self.legs))  # a numpy integer too: the description stays JSON
         if self.legs > 1 and self.leg_length < 2.0 * self.turn_radius - 1e-9:
             raise ConfigError(
                 f"path.leg_length = {self.leg_length:g} m is shorter than the two turns at its ends need "
@@ -493,3 +507,51 @@ def path_coordinates(
     if current is not None:
         along = along + current[0] * c + current[1] * s
     return PathCoordinates(ell, offset, beta, kappa, metric, along / metric)
+
+
+# ----------------------------------------------------------------------------- one point at a time
+# The same evaluations for one arc length, on the segment arrays of Path.segment_arrays, in plain
+# arithmetic: the compiled kernel (marine_formation_env._numba) registers them with numba and calls
+# them per vessel. They compute what Path.frame / Path.project compute, in the same order.
+
+
+def segment_frame(
+    start: np.ndarray, x0: np.ndarray, y0: np.ndarray, gamma0: np.ndarray, kappa: np.ndarray, ell: float
+) -> tuple[float, float, float, float]:
+    """``(x, y, γ, κ)`` of the path at one arc length ``ell`` (as :meth:`Path.frame`)."""
+    k = 0
+    for m in range(1, start.shape[0]):
+        if ell >= start[m]:
+            k = m
+    s = ell - start[k]
+    g0, kap = gamma0[k], kappa[k]
+    gamma = g0 + kap * s
+    if kap != 0.0:
+        return (
+            x0[k] + (math.sin(gamma) - math.sin(g0)) / kap,
+            y0[k] + (math.cos(g0) - math.cos(gamma)) / kap,
+            gamma,
+            kap,
+        )
+    return x0[k] + s * math.cos(g0), y0[k] + s * math.sin(g0), gamma, kap
+
+
+def segment_project(
+    start: np.ndarray,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    gamma0: np.ndarray,
+    kappa: np.ndarray,
+    x: float,
+    y: float,
+    guess: float,
+) -> float:
+    """The projection's arc length of one point, by Newton's method from ``guess`` (as :meth:`Path.project`)."""
+    ell = guess
+    for _ in range(PROJECTION_ITERATIONS):
+        px, py, gamma, kap = segment_frame(start, x0, y0, gamma0, kappa, ell)
+        dx, dy = x - px, y - py
+        c, s = math.cos(gamma), math.sin(gamma)
+        along, normal = dx * c + dy * s, dy * c - dx * s
+        ell = ell + along / max(1.0 - kap * normal, MIN_METRIC)
+    return ell

@@ -230,12 +230,18 @@ class FormationRenderer:
                 )
         return scene
 
-    def draw(self, state: np.ndarray, time: float, links: np.ndarray | None = None) -> np.ndarray | None:
+    def draw(
+        self, state: np.ndarray, time: float, links: np.ndarray | None = None, arc: np.ndarray | None = None
+    ) -> np.ndarray | None:
         """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human.
 
         ``links``: ``(n, n)`` booleans, ``links[j, i]`` iff the link i → j is up
         now (:meth:`~marine_formation_env.core.FormationCore.links_up`); None:
-        every link of the graph.
+        every link of the graph. ``arc``: ``(n,)`` the vessels' projections on a
+        curved path (:attr:`~marine_formation_env.core.FormationCore.arc`); None:
+        found by a global search at the first frame and followed from frame to
+        frame (then render every few control periods, or the projection may
+        jump between a route's legs).
         """
         cfg = self.config
         if time == 0.0 or not self._trail:
@@ -246,9 +252,12 @@ class FormationRenderer:
         if cfg.straight:
             theta, cross_track, slots = state[:, 0] - offsets[:, 0], state[:, 1] - offsets[:, 1], None
         else:
-            if time == 0.0 or self._arc is None:
-                self._arc = cfg.path.closest(state[:, 0], state[:, 1])
-            self._arc = cfg.path.project(state[:, 0], state[:, 1], self._arc)
+            if arc is not None:
+                self._arc = np.array(arc, dtype=float)
+            else:
+                if time == 0.0 or self._arc is None:
+                    self._arc = cfg.path.closest(state[:, 0], state[:, 1])
+                self._arc = cfg.path.project(state[:, 0], state[:, 1], self._arc)
             px, py, gamma, _ = cfg.path.frame(self._arc)
             offset = (state[:, 1] - py) * np.cos(gamma) - (state[:, 0] - px) * np.sin(gamma)
             theta, cross_track = self._arc - offsets[:, 0], offset - offsets[:, 1]

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env.channel import ChannelConfig
+from marine_formation_env.control import lane_speed
 from marine_formation_env.disturbances import Current, SensorNoise
 from marine_formation_env.errors import (
     ConfigError,
@@ -270,7 +271,7 @@ def resolve(settings: Settings) -> ScenarioConfig:
     offsets = _resolve_formation(s.formation, n)
     schedule, graph = _resolve_graphs(s, n, topology_seed)
     vessel, gains, profile = _resolve_vessel_and_speeds(s)
-    path, corridor = _resolve_path(s, offsets, gains, profile)
+    path, corridor = _resolve_path(s, offsets, vessel, gains, profile)
     dt, substeps = _resolve_timing(s, schedule)
     noise, nominal = _resolve_initial_state(s, n, offsets, profile)
     reward = _resolve_part(s.reward, RewardConfig, "reward")
@@ -452,14 +453,18 @@ def _resolve_vessel_and_speeds(s: Settings) -> tuple[VesselParams, Gains, SpeedP
     return vessel, gains, profile
 
 
-def _resolve_path(s: Settings, offsets: np.ndarray, gains: Gains, profile: SpeedProfile) -> tuple[Path, float]:
+def _resolve_path(
+    s: Settings, offsets: np.ndarray, vessel: VesselParams, gains: Gains, profile: SpeedProfile
+) -> tuple[Path, float]:
     """The path and the corridor, checked against the lanes and the generalized assumption (19).
 
     Lane ``j`` (offset ``D_yj``) on a part of curvature ``κ`` needs
     ``1 − κ·D_yj > 0`` (inside the radius of curvature) and, for the surge
     command ``(1 − κ·D_yj)·w`` with ``w ∈ (u_d − a, u_d + a)``,
-    ``(1 − κ·D_yj)·(u_d ± a)`` inside ``[U_min, U_max]`` for every ``u_d(t)``
-    (docs/paths.md, "The generalized assumption (19)").
+    ``(1 − κ·D_yj)·(u_d ± a)`` inside ``[U_min, U_max]`` for every ``u_d(t)``,
+    the lower end computed with the sway of the turn as the lane's surge
+    command is (:func:`~marine_formation_env.control.lane_speed`; docs/paths.md,
+    "The generalized assumption (19)").
     """
     try:
         path = make_path(s.path)
@@ -491,7 +496,9 @@ def _resolve_path(s: Settings, offsets: np.ndarray, gains: Gains, profile: Speed
                 raise ConfigError(
                     f"{where} lies beyond the turn's centre of curvature: every |D_y| must be < {radius:g} m"
                 )
-            slow, fast = factor * (lo - a), factor * (hi + a)
+            # the lane's surge command (the sway takes part of the lane speed) at the slowest and fastest w
+            slow = float(lane_speed(vessel, np.float64(lo - a), 0.0, np.float64(kappa), float(d_y))[0])
+            fast = factor * (hi + a)
             if slow < s.u_min - 1e-9 or fast > s.u_max + 1e-9:
                 raise ConfigError(
                     f"{where} needs surge speeds (1 − κ·D_y)·(u_d ± a) from {slow:.4g} to {fast:.4g} m/s, outside the "
@@ -648,6 +655,10 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
     """
     state = np.asarray(state, dtype=float)
     spread = np.zeros(6) if noise is None else np.asarray(noise, dtype=float)
+    across = float(spread[1])  # on a curved path the noise's x and y are along and across the path
+    if not config.straight:
+        spread = spread.copy()
+        spread[0] = spread[1] = math.hypot(spread[0], spread[1])  # how far a drawn start can move in x or y
     x_lo, x_hi, y_lo, y_hi = config.workspace
     bounds = (
         ("x", 0, x_lo, x_hi, "m", "the workspace"),
@@ -669,12 +680,12 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
             )
     if not config.straight:
         e = cross_track_errors(config, state)
-        reach = np.abs(e) + float(max(spread[0], spread[1]))
+        reach = np.abs(e) + across  # the noise's y is across the path (sample_initial_state)
         bad = np.flatnonzero(reach > config.corridor)
         if bad.size:
             j = int(bad[0])
             return (
-                f"vessel_{j} starts {e[j]:+.4g} m off its lane (± init_noise {max(spread[0], spread[1]):g} m), "
+                f"vessel_{j} starts {e[j]:+.4g} m off its lane (± init_noise {across:g} m), "
                 f"outside the corridor |e| ≤ {config.corridor:g} m; the episode would end at its first step"
             )
     if config.safety_distance > 0:
@@ -705,6 +716,10 @@ def cross_track_errors(config: ScenarioConfig, state: np.ndarray) -> np.ndarray:
 def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np.ndarray:
     """The nominal initial state plus uniform ``init_noise``, shape ``(N, 6)``, drawn from ``rng``.
 
+    The noise is added in the path's frame (x along the path, y across it, ψ
+    relative to it), then the state is carried to the inertial frame; on the
+    straight path the two frames are one.
+
     Draws are rejected (up to 100 times) while two vessels start closer than
     twice the safety distance.
 
@@ -715,7 +730,9 @@ def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np
         return np.array(config.start_state)
     half_widths = config.init_noise.as_array()
     for _ in range(100):
-        candidate = config.start_state + rng.uniform(-1.0, 1.0, size=config.start_state.shape) * half_widths
+        # in the path's frame (along, across the path; the inertial frame on the straight path)
+        noisy = config.initial_state + rng.uniform(-1.0, 1.0, size=config.initial_state.shape) * half_widths
+        candidate = path_to_inertial(config.path, noisy)
         if min_separation(candidate[None])[0] > 2.0 * config.safety_distance:
             return candidate
     raise RuntimeError(

@@ -72,6 +72,20 @@ CASES = {
         "current": {"speed": 0.5, "direction": 1.0, "amplitude": 0.2, "period": 60.0},
     },
     "acoustic-preset": {"scenario": "acoustic"},
+    # curved paths (docs/paths.md): the projection followed in the kernel, the loops in path coordinates,
+    # the corridor, the channel transmitting (ℓ, ℓ̇) over ground of noisy measurements
+    "circle": {"scenario": "circle"},
+    "survey-ends": {"scenario": "survey", "horizon": 20.0, "corridor": 45.0},
+    "survey-acoustic-noise-current-ilos": {
+        "scenario": "survey_acoustic",
+        "sensor_noise": {"position": 0.5, "heading": 0.01, "speed": 0.05},
+        "current": {"speed": 0.4, "direction": 1.0},
+        "los_integral_gain": 1.0,
+    },
+    "waypoints-right-turns": {
+        "scenario": "paper",
+        "path": {"kind": "waypoints", "waypoints": [[0, 0], [150, 0], [500, -400], [900, -400]], "turn_radius": 320.0},
+    },
     "radio-preset": {"scenario": "radio", "n_vessels": 5, "topology": "ring", "safety_distance": 30.0},
 }
 
@@ -104,7 +118,7 @@ def test_numba_core_matches_numpy(level: str, case: str) -> None:
     if level != "speed":
         overrides.pop("los_integral_gain", None)  # a speed-level option
     cfg = make_config(overrides.pop("scenario", "paper"), action_level=level, **overrides)
-    compare_backends(cfg, b=5, steps=120, check_ends=case == "random6-episode-ends")
+    compare_backends(cfg, b=5, steps=120, check_ends=case in ("random6-episode-ends", "survey-ends"))
 
 
 def test_numba_channel_matches_numpy_with_threads_and_autoreset() -> None:
@@ -113,6 +127,8 @@ def test_numba_channel_matches_numpy_with_threads_and_autoreset() -> None:
 
     cfg = make_config("acoustic", action_level="force", horizon=3.0, sensor_noise={"position": 1.0})
     compare_backends(cfg, b=PARALLEL_FROM, steps=70, check_ends=True)
+    curved = make_config("survey_acoustic", action_level="speed", horizon=6.0, sensor_noise={"position": 1.0})
+    compare_backends(curved, b=PARALLEL_FROM, steps=40, check_ends=True)
 
 
 def compare_backends(cfg, b: int, steps: int, check_ends: bool) -> None:
@@ -202,10 +218,10 @@ def test_kernel_cache_follows_the_sources_it_compiles_in():
     import hashlib
     import inspect
 
-    from marine_formation_env import _numba, channel, control, dynamics, rules
+    from marine_formation_env import _numba, channel, control, dynamics, paths, rules
 
     digest = hashlib.sha256()
-    for module in (dynamics, control, rules, channel):
+    for module in (dynamics, control, rules, channel, paths):
         digest.update(inspect.getsource(module).encode())
     key = digest.hexdigest()[:16]
     assert _numba.step_kernel(1).__name__ == f"_kernel_{key}"

@@ -317,7 +317,7 @@ def _final_circle(monkeypatch_crab=None, monkeypatch_lane=None, monkeypatch=None
         monkeypatch.setattr(control, "turn_crab", monkeypatch_crab)
     if monkeypatch_lane is not None:
         monkeypatch.setattr(reference, "lane_speed", monkeypatch_lane)
-    env = marine_formation_env.parallel_env("circle")
+    env = marine_formation_env.parallel_env("circle", backend="numpy")  # the laws replaced here are Python's
     policy = ReferencePolicy(env)
     obs, _ = env.reset(seed=0)
     while env.agents:
@@ -358,3 +358,71 @@ def test_plain_laws_leave_the_predicted_offsets_and_the_shipped_ones_remove_them
     predicted = 5.0 * math.hypot(1.0, state[leader, 4] / state[leader, 3])
     assert ell_dot[leader] == pytest.approx(predicted, rel=1e-4)
     assert ell_dot[leader] - 5.0 > 0.03 and np.abs(e).max() < 1e-4
+
+
+# --------------------------------------------------------------------------- review findings, kept fixed
+
+
+def test_a_route_whose_first_turn_uses_up_its_first_leg_still_runs_along_that_leg_before_its_start():
+    radius = 100.0
+    fillet = radius * math.tan(math.pi / 8)  # the 45° corner's tangent length: the whole first leg
+    path = WaypointPath(((0.0, 0.0), (fillet, 0.0), (fillet + 300.0, 300.0)), turn_radius=radius)
+    x, y, gamma, kappa = path.frame(np.array([-300.0, -1.0]))
+    np.testing.assert_allclose([x[0], y[0], x[1], y[1]], [-300.0, 0.0, -1.0, 0.0], atol=1e-9)
+    assert not gamma.any() and not kappa.any()
+    assert path.closest(-50.0, 3.0) == pytest.approx(-50.0)
+
+
+def test_lane_command_is_exact_and_finite_on_a_straight_part_whatever_w():
+    from marine_formation_env.control import lane_speed
+    from marine_formation_env.params import get_vessel
+
+    w = np.array([-1.0, 0.0, 3.2, 5.0])
+    u, u_dot = lane_speed(get_vessel("supply"), w, np.array([0.3, 0.0, -0.1, 0.2]), np.zeros(4), 50.0)
+    assert np.array_equal(u, w) and np.array_equal(u_dot, [0.3, 0.0, -0.1, 0.2])
+    action = ReferencePolicy(make_config("paper")).act_batch(np.zeros((3, 18)))
+    assert np.all(np.isfinite(action))
+
+
+def test_generalized_assumption_19_counts_the_sway_on_the_slow_side():
+    """u_d = 4.2 on a circle of 800 m: (1 − 50/800)·3.2 = 3.0 exactly, the sway of the turn takes 3 mm/s more."""
+    with pytest.raises(ConfigError, match=r"from 2\.997 to"):
+        make_config("paper", path={"kind": "circle", "radius": 800.0}, u_d={"mean": 4.2})
+
+
+def test_initial_state_noise_is_drawn_across_the_path_and_the_corridor_holds_every_draw():
+    """On a route heading 45°, y-noise of ±60 m is across the path: every start is within |e| ≤ 60 + nominal."""
+    from marine_formation_env.scenarios import cross_track_errors, sample_initial_state
+
+    path = {"kind": "waypoints", "waypoints": [[0, 0], [2000, 2000]], "turn_radius": 300.0}
+    cfg = make_config("paper", path=path, init_noise={"x": 60.0, "y": 60.0}, corridor=110.0, horizon=10.0)
+    rng = np.random.default_rng(0)
+    nominal = np.abs(cfg.initial_state[:, 1] - cfg.formation[:, 1])
+    for _ in range(300):
+        e = cross_track_errors(cfg, sample_initial_state(cfg, rng))
+        assert np.all(np.abs(e) <= nominal + 60.0 + 1e-9)
+    with pytest.raises(ConfigError, match="outside the corridor"):
+        make_config("paper", path=path, init_noise={"y": 80.0}, corridor=110.0)  # 40 m nominal + 80 > 110
+
+
+def test_rendered_projection_is_the_core_s_even_when_frames_are_far_apart():
+    pytest.importorskip("matplotlib")
+    env = marine_formation_env.parallel_env("circle", render_mode="rgb_array")
+    policy = ReferencePolicy(env)
+    obs, _ = env.reset(seed=0)
+    for k in range(1, 601):
+        obs, *_ = env.step(policy.act(obs))
+        if k % 150 == 0:  # 75 s between frames: more than a third of a lap
+            env.render()
+            np.testing.assert_allclose(env.unwrapped._rendering._renderer._arc, env.core.arc[0], atol=1e-9)
+    env.close()
+
+
+def test_speed_goal_is_through_the_water_with_a_current():
+    """The speed error of a curved path is (1 − κ·D_y)·(ℓ̇ − u_d) with ℓ̇ through the water, as u − u_d is."""
+    from baselines.metrics import goal_errors
+
+    cfg = make_config("circle", horizon=30.0)
+    traj = evaluate_episodes(ReferencePolicy(cfg), cfg, seeds=[0])[0]
+    with_current = make_config("circle", horizon=30.0, current={"speed": 0.4, "direction": 0.0})
+    np.testing.assert_array_equal(goal_errors(traj, cfg)["speed"], goal_errors(traj, with_current)["speed"])
