@@ -125,6 +125,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
+        ("threads=0", "threads must be a whole number ≥ 1, got 0"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -145,7 +146,26 @@ def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
 
 def test_resolve_fills_defaults_and_keeps_the_seed():
     cfg = resolve({"scenario": "acoustic"}, seed=5)
-    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["num_envs"] == 64
+    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["num_envs"] == 64 and cfg["threads"] == 1
+    assert resolve({"threads": None}, seed=0)["threads"] is None  # torch's default
+
+
+def test_training_sets_torch_s_threads_from_the_config(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(torch, "set_num_threads", calls.append)
+    args = [
+        "--out",
+        str(tmp_path / "run"),
+        "--no-progress",
+        "--set",
+        "threads=2",
+        "--set",
+        "env_kwargs.action_level=speed",
+    ]
+    for item in TINY:
+        args += ["--set", item]
+    assert main(args) == 0
+    assert calls == [2]
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):
