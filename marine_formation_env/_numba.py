@@ -169,6 +169,19 @@ def _curved_derivative(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
+def _curved_stage(  # type: ignore[no-untyped-def]
+    level, p, g, s0, sx, sy, sg, sk, guess, steer,
+    x, y, psi, u, v, r, k, step, cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea,
+):  # fmt: skip
+    """:func:`_curved_derivative` at the RK4 stage state ``(x, y, ψ, u, v, r) + step·k``."""
+    return _curved_derivative(
+        level, p, g, s0, sx, sy, sg, sk, guess, steer,
+        x + step * k[0], y + step * k[1], psi + step * k[2], u + step * k[3], v + step * k[4], r + step * k[5],
+        cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea,
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
 def _path_point(s0, sx, sy, sg, sk, x, y, psi, u, v, guess):  # type: ignore[no-untyped-def]
     """``(ℓ, e + D_y, β, κ, 1 − κ·d, u cos β − v sin β, cos γ, sin γ)`` of one vessel (``paths.path_coordinates``)."""
     ell = segment_project(s0, sx, sy, sg, sk, x, y, guess)
@@ -297,20 +310,17 @@ def _kernel(  # type: ignore[no-untyped-def]
                         level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
                         x, y, psi, u, v, r, c1, t, uc0, uc_dot, tu_max, tr_max, sea,
                     )  # fmt: skip
-                    k2 = _curved_derivative(
+                    k2 = _curved_stage(
                         level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
-                        x + hh * k1[0], y + hh * k1[1], psi + hh * k1[2], u + hh * k1[3], v + hh * k1[4],
-                        r + hh * k1[5], c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
+                        x, y, psi, u, v, r, k1, hh, c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
                     )  # fmt: skip
-                    k3 = _curved_derivative(
+                    k3 = _curved_stage(
                         level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
-                        x + hh * k2[0], y + hh * k2[1], psi + hh * k2[2], u + hh * k2[3], v + hh * k2[4],
-                        r + hh * k2[5], c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
+                        x, y, psi, u, v, r, k2, hh, c1, t + hh, uc0, uc_dot, tu_max, tr_max, sea,
                     )  # fmt: skip
-                    k4 = _curved_derivative(
+                    k4 = _curved_stage(
                         level, p, g, seg_start, seg_x0, seg_y0, seg_g0, seg_k, guess, d_y,
-                        x + h * k3[0], y + h * k3[1], psi + h * k3[2], u + h * k3[3], v + h * k3[4],
-                        r + h * k3[5], c1, t + h, uc0, uc_dot, tu_max, tr_max, sea,
+                        x, y, psi, u, v, r, k3, h, c1, t + h, uc0, uc_dot, tu_max, tr_max, sea,
                     )  # fmt: skip
                 else:
                     fixed = (level, p, g, printed, d_y, c0, c1, uc0, uc_dot, tu_max, tr_max, sea)
