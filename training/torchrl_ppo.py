@@ -384,8 +384,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
 
     set_composite_lp_aggregate(False).set()
     if cfg["threads"] is not None:
-        # one thread by default, as training.train: on a shared 2-core machine two intra-op threads made a
-        # minibatch step 1.6-3x slower than one (38 400 rows through the [64, 64] MLP, under load)
+        # one thread by default, as training.train: on the shared 2-core machine, with other processes running,
+        # two intra-op threads made an iteration several times slower (docs/results.md, training throughput)
         torch.set_num_threads(cfg["threads"])
     seed = cfg["seed"]
     torch.manual_seed(seed)
