@@ -148,11 +148,7 @@ def _curved_derivative(  # type: ignore[no-untyped-def]
     Its path coordinates come from the stage's position, projected from ``guess`` (the step's start).
     """
     t0, c_speed, c_amp, c_omega, c_cos, c_sin = sea
-    ell = segment_project(s0, sx, sy, sg, sk, x, y, guess)
-    px, py, gamma, kappa = segment_frame(s0, sx, sy, sg, sk, ell)
-    offset = (y - py) * math.cos(gamma) - (x - px) * math.sin(gamma)
-    beta = psi - gamma
-    metric = 1.0 - kappa * offset
+    _, offset, beta, kappa, metric, _, _, _ = _path_point(s0, sx, sy, sg, sk, x, y, psi, u, v, guess)
     acc = accelerations(p, u, v, r)
     u_c = u_c0 + u_c_dot * t
     if level == 1:

@@ -214,7 +214,6 @@ class FormationCore:
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self._last_u_c = np.zeros((self.num_envs, n))  # previous u_c [m/s] (speed, guidance)
         self.arc = np.zeros((self.num_envs, n))  # ℓ_j: each vessel's projection on a curved path [m]
-        self._arc_guess = self.arc  # where the projections of an RK4 step's stages start from
         self._fresh = np.ones(self.num_envs, dtype=bool)  # no previous command since reset
         self._current: tuple[float, float, float, float, float] | None = (
             None if config.current.is_zero else config.current.coefficients
@@ -374,7 +373,6 @@ class FormationCore:
                 state = rk4_step(rhs, state, h, k * h)
                 if self._curved:  # follow the projections: Newton from where they were
                     self.arc = cfg.path.project(state[..., X], state[..., Y], self.arc)
-                    self._arc_guess = self.arc
             self.state = state
             self.time = self.time + cfg.dt
             self.steps = self.steps + 1
@@ -526,7 +524,8 @@ class FormationCore:
         """:meth:`closed_loop` on a curved path (``speed``, ``guidance``): the loops of docs/paths.md.
 
         At every RK4 stage the vessels' path coordinates are computed from the
-        stage's state, projecting from the step's start (``_arc_guess``). At
+        stage's state, projecting from the step's start (:attr:`arc`, which
+        the step moves on only after each RK4 step). At
         ``guidance`` the heading command is relative to the path, ``ψ_d = γ(ℓ) + β_d``.
         """
         cfg = self.config
@@ -539,7 +538,7 @@ class FormationCore:
 
         def rhs_curved(t: float, s: np.ndarray) -> np.ndarray:
             psi, u, v, r = s[..., PSI], s[..., U], s[..., V], s[..., R]
-            c = path_coordinates(path, s[..., X], s[..., Y], psi, u, v, self._arc_guess)
+            c = path_coordinates(path, s[..., X], s[..., Y], psi, u, v, self.arc)
             acc = accelerations(p, u, v, r)
             u_c = u_c0 + u_c_dot * t
             if beta_d is None:  # speed: LOS on the error it steers on (D_y shifted by integral LOS)

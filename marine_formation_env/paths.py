@@ -230,11 +230,16 @@ class Path:
             best_dist = np.where(better, dist, best_dist)
         return best_ell
 
+    def lane_point(self, ell: Any, offset: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x, y, γ)``: the point ``P(ℓ) + offset·n(ℓ)`` of the lane ``offset`` [m] and the tangent angle there."""
+        x, y, gamma, _ = self.frame(ell)
+        return x - offset * np.sin(gamma), y + offset * np.cos(gamma), gamma
+
     def points(self, ell_from: float, ell_to: float, offset: float = 0.0, spacing: float = 5.0) -> np.ndarray:
         """``(M, 2)`` points of the lane ``P(ℓ) + offset·n(ℓ)`` for ``ℓ`` from ``ell_from`` to ``ell_to`` (drawing)."""
         count = max(2, math.ceil(abs(ell_to - ell_from) / spacing) + 1)
-        x, y, gamma, _ = self.frame(np.linspace(ell_from, ell_to, count))
-        return np.column_stack([x - offset * np.sin(gamma), y + offset * np.cos(gamma)])
+        x, y, _ = self.lane_point(np.linspace(ell_from, ell_to, count), offset)
+        return np.column_stack([x, y])
 
 
 def _point(p: np.ndarray) -> tuple[float, float]:

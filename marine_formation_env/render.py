@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env.errors import check_number
+from marine_formation_env.paths import path_coordinates
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["VESSEL_COLORS", "FormationRenderer", "even_frame", "hull_polygon", "render_fps", "require_matplotlib"]
@@ -170,13 +171,10 @@ class FormationRenderer:
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_title("close-up: hulls to scale, formation slots (circles), links i → j (arrows)", fontsize=8)
-        start = config.start_state if not config.straight else None
-        if start is not None:
-            self._trail = [np.array(start[:, :2])]
-        self._place_zoom(
-            None if start is not None else np.column_stack([config.formation, np.zeros((config.n_vessels, 4))])
-        )
-        self._trail = []
+        if config.straight:
+            self._place_zoom(np.column_stack([config.formation, np.zeros((config.n_vessels, 4))]))
+        else:
+            self._place_zoom(None, config.start_state[:, :2])
         self.fig.tight_layout()  # once: the layout does not change from frame to frame
         # what moves is drawn over a cached background (blitting): the world panel's moving artists
         # and title, and the whole close-up (its limits, hence its ticks, change every frame)
@@ -253,16 +251,16 @@ class FormationRenderer:
             theta, cross_track, slots = state[:, 0] - offsets[:, 0], state[:, 1] - offsets[:, 1], None
         else:
             if arc is not None:
-                self._arc = np.array(arc, dtype=float)
+                guess = np.asarray(arc, dtype=float)
+            elif time == 0.0 or self._arc is None:
+                guess = cfg.path.closest(state[:, 0], state[:, 1])
             else:
-                if time == 0.0 or self._arc is None:
-                    self._arc = cfg.path.closest(state[:, 0], state[:, 1])
-                self._arc = cfg.path.project(state[:, 0], state[:, 1], self._arc)
-            px, py, gamma, _ = cfg.path.frame(self._arc)
-            offset = (state[:, 1] - py) * np.cos(gamma) - (state[:, 0] - px) * np.sin(gamma)
-            theta, cross_track = self._arc - offsets[:, 0], offset - offsets[:, 1]
-            sx, sy, sg, _ = cfg.path.frame(float(np.mean(theta)) + offsets[:, 0])
-            slots = np.column_stack([sx - offsets[:, 1] * np.sin(sg), sy + offsets[:, 1] * np.cos(sg)])
+                guess = self._arc
+            c = path_coordinates(cfg.path, state[:, 0], state[:, 1], state[:, 2], state[:, 3], state[:, 4], guess)
+            self._arc = c.ell
+            theta, cross_track = c.ell - offsets[:, 0], c.offset - offsets[:, 1]
+            sx, sy, _ = cfg.path.lane_point(float(np.mean(theta)) + offsets[:, 0], offsets[:, 1])
+            slots = np.column_stack([sx, sy])
         spread = float(np.ptp(theta))
         cross = float(np.max(np.abs(cross_track)))
         for scene in (self._world, self._zoom):
@@ -275,7 +273,10 @@ class FormationRenderer:
             f"{cfg.name} ({cfg.action_level})   t = {time:6.1f} s   coordination spread {spread:8.2f} m   "
             f"max |{'y − D_y' if cfg.straight else 'e'}| {cross:7.2f} m{sea}"
         )
-        self._place_zoom(state if cfg.straight else None)
+        if cfg.straight:
+            self._place_zoom(state)
+        else:
+            self._place_zoom(None, state[:, :2])
         canvas = self.fig.canvas
         if self._background is None:
             self.ax_zoom.set_visible(False)
@@ -324,12 +325,13 @@ class FormationRenderer:
     def _place_zoom(self, state: np.ndarray | None, positions: np.ndarray | None = None) -> None:
         """The close-up's window: centred on the formation, wide enough for every vessel and slot.
 
-        ``state`` None (a curved path): centred on the vessels of the last frame, whatever their heading.
+        On a curved path ``state`` is None and ``positions`` ``(n, 2)`` are the
+        vessels' positions: the window is centred on them, whatever their heading.
         """
         offsets = self.config.formation
         ratio = 0.3  # height / width of the close-up window
         if state is None:
-            points = np.array(self._trail[-1])
+            points = np.asarray(positions)
             cx, cy = float(np.mean(points[:, 0])), float(np.mean(points[:, 1]))
             reach = float(np.max(np.hypot(points[:, 0] - cx, points[:, 1] - cy))) + 0.5 * float(np.ptp(offsets[:, 0]))
             half_w = max(0.5 * self.zoom_width, 1.2 * reach + 50.0, (1.2 * reach + 40.0) / ratio)

@@ -36,7 +36,7 @@ from marine_formation_env.errors import (
 )
 from marine_formation_env.graph import CommGraph, GraphError, make_graph
 from marine_formation_env.params import Gains, ParameterError, VesselParams, get_vessel
-from marine_formation_env.paths import Path, make_path
+from marine_formation_env.paths import Path, make_path, path_coordinates
 from marine_formation_env.settings import (
     ACROSS_SPACING,
     ACTION_LEVELS,
@@ -527,10 +527,8 @@ def path_to_inertial(path: Path, state: np.ndarray) -> np.ndarray:
     state = np.asarray(state, dtype=float)
     if path.is_straight:
         return np.array(state)
-    px, py, gamma, _ = path.frame(state[..., 0])
     out = np.array(state)
-    out[..., 0] = px - state[..., 1] * np.sin(gamma)
-    out[..., 1] = py + state[..., 1] * np.cos(gamma)
+    out[..., 0], out[..., 1], gamma = path.lane_point(state[..., 0], state[..., 1])
     out[..., 2] = state[..., 2] + np.mod(gamma + np.pi, 2.0 * np.pi) - np.pi
     return out
 
@@ -707,10 +705,9 @@ def cross_track_errors(config: ScenarioConfig, state: np.ndarray) -> np.ndarray:
     For a start (or any state without history); the simulation follows the
     projection continuously instead (:meth:`~marine_formation_env.paths.Path.project`).
     """
-    x, y = state[..., 0], state[..., 1]
-    ell = config.path.closest(x, y)
-    px, py, gamma, _ = config.path.frame(ell)
-    return (y - py) * np.cos(gamma) - (x - px) * np.sin(gamma) - config.formation[:, 1]  # type: ignore[no-any-return]
+    x, y, psi, u, v = (state[..., k] for k in range(5))
+    found = path_coordinates(config.path, x, y, psi, u, v, config.path.closest(x, y))
+    return found.offset - config.formation[:, 1]  # type: ignore[no-any-return]
 
 
 def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np.ndarray:
