@@ -16,14 +16,18 @@ Examples::
     python -m baselines.evaluate --scenario current --set action_level=guidance \\
         --policy reference --policy reference:ilos=1.0
 
-``--policy`` repeats: ``reference``, ``random``, or a model saved by
-``python -m training.train`` (``runs/NAME/model.zip`` or the run folder). The
+``--policy`` repeats: ``reference``, ``random``, ``pretrained:NAME`` (a policy
+shipped with the project, ``--list-pretrained`` lists them; numpy only), or a
+model saved by ``python -m training.train`` (``runs/NAME/model.zip`` or the
+run folder; ``training.torchrl_ppo`` and ``training.rllib_ppo`` run folders
+too). The
 reference takes options after a colon, comma-separated: ``extrapolate``
 (predict neighbours' positions from their last message's velocity and age) and
 ``ilos=σ`` (integral LOS with gain σ [m/s], ``ilos`` alone: σ = 1), e.g.
 ``reference:extrapolate,ilos=1.0``. A
-model brings its training scenario and env overrides; ``--scenario`` and
-``--set`` take precedence over them. ``--set KEY=VALUE`` overrides any scenario
+model or pretrained policy brings its training scenario and env overrides;
+``--scenario`` and ``--set`` take precedence over them (a pretrained policy
+refuses a team size, action level or observation layout it cannot take). ``--set KEY=VALUE`` overrides any scenario
 field (``--set action_level=force``, ``--set n_vessels=5 --set topology=ring``,
 ``--set 'gains={"delta": 80}'``); values are Python/JSON literals, anything
 else is taken as a string. A dotted key sets one field of a nested setting and
@@ -85,9 +89,17 @@ def reference_options(spec: str) -> dict[str, Any]:
     return options
 
 
+PRETRAINED_PREFIX = "pretrained:"
+
+
+def is_pretrained(spec: str) -> bool:
+    """Whether a ``--policy`` value names a shipped pretrained policy (``pretrained:NAME``)."""
+    return spec.startswith(PRETRAINED_PREFIX)
+
+
 def is_model_path(spec: str) -> bool:
     """Whether a ``--policy`` value names a saved model rather than a built-in policy."""
-    builtin = spec in BUILTIN_POLICIES or is_reference(spec)
+    builtin = spec in BUILTIN_POLICIES or is_reference(spec) or is_pretrained(spec)
     return not builtin and (spec.endswith(".zip") or Path(spec).is_dir())
 
 
@@ -111,6 +123,11 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
     if loaded is not None and spec in loaded:
         policy = loaded[spec]
         obs_dim = env.observation_space(env.possible_agents[0]).shape[0]
+        if is_pretrained(spec):
+            from baselines.pretrained import check_compatible
+
+            check_compatible(policy.info, env.config, obs_dim)
+            return policy
         expected, actions = policy.observation_dim, policy.action_dim
         if expected != obs_dim or actions != env.config.action_dim:
             raise ValueError(
@@ -120,7 +137,9 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
                 f"{env.config.n_vessels}); evaluate it on the scenario it was trained on"
             )
         return policy
-    raise ValueError(f"unknown policy {spec!r}; known policies: {list(BUILTIN_POLICIES)} or a saved model (.zip)")
+    raise ValueError(
+        f"unknown policy {spec!r}; known policies: {list(BUILTIN_POLICIES)}, pretrained:NAME or a saved model (.zip)"
+    )
 
 
 def progress_bar(total: int, enabled: bool, desc: str = "episodes") -> Any:
@@ -160,7 +179,13 @@ def evaluate(
     loaded: dict[str, Any] = {}
     trained_on: dict[str, Any] = {}
     for spec in policies:
-        if is_model_path(spec):
+        if is_pretrained(spec):
+            from baselines.pretrained import load_pretrained
+
+            loaded[spec], info = load_pretrained(spec[len(PRETRAINED_PREFIX) :])
+            if not trained_on:
+                trained_on = {"scenario": info.scenario, **info.env_kwargs}
+        elif is_model_path(spec):
             loaded[spec], run_config = load_model(spec)
             if not trained_on:
                 trained_on = {"scenario": run_config["scenario"], **run_config["env_kwargs"]}
@@ -201,6 +226,7 @@ TABLE_COLUMNS = (
     ("settling_time", "settling [s]", "{:.1f}"),
     ("time_outside_speed_band", "outside band [s]", "{:.1f}"),
     ("effort", "effort", "{:.3g}"),
+    ("action_change", "Δa", "{:.3g}"),
     ("success", "success", "{:.0%}"),
 )
 
@@ -237,8 +263,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--policy",
         action="append",
         dest="policies",
-        help="policy to run; repeatable: reference[:extrapolate,ilos=σ], random, or a saved model .zip / run folder",
+        help="policy to run; repeatable: reference[:extrapolate,ilos=σ], random, pretrained:NAME, "
+        "or a saved model .zip / run folder",
     )
+    parser.add_argument("--list-pretrained", action="store_true", help="list the shipped pretrained policies and exit")
     parser.add_argument("--episodes", type=int_at_least(1), default=1, help="episodes per policy (default 1)")
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the first episode (default 0)")
     parser.add_argument("--json", type=Path, help="write metrics (per episode and summary) to this JSON file")
@@ -249,6 +277,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     args = parser.parse_args(argv)
+    if args.list_pretrained:
+        from baselines.pretrained import format_listing, list_pretrained
+
+        print(format_listing(list_pretrained()))
+        return 0
     policies = args.policies or ["reference"]
     try:
         for flag, path in (("--json", args.json), ("--save-trajectory", args.save_trajectory), ("--plot", args.plot)):
@@ -283,7 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             plot_comparison(first, cfg, args.plot, title=f"{report['scenario']} ({cfg.action_level}), seed {args.seed}")
             for k, (label, traj) in enumerate(first.items()):
-                name = Path(label).parent.name if is_model_path(label) else label
+                name = Path(label).parent.name if is_model_path(label) else label.replace(PRETRAINED_PREFIX, "")
                 name = re.sub(r"[^A-Za-z0-9_.=-]+", "_", name)  # "reference:ilos" → "reference_ilos"
                 path = args.plot.with_name(f"{args.plot.stem}_{k}_{name}{args.plot.suffix}")
                 plot_episode(traj, cfg, path, title=f"{report['scenario']}: policy {label!r}, seed {args.seed}")

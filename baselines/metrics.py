@@ -23,6 +23,9 @@ Definitions (n vessels, θ_j = x_j − D_xj):
 * time outside the band: control periods with some u_cj ∉ (U_min, U_max), in s;
   and the same for the vessels' actual surge speeds u_j (recorded states);
 * effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
+* action change (smoothness): mean over consecutive periods, vessels and
+  action components of the normalized action's change |a_k − a_{k−1}|
+  (each component in [−1, 1], so 0 … 2; 0 for a constant command);
 * return: per-vessel sum of rewards, averaged over vessels;
 * success: the episode ran to its time limit (no collision, no exit from the
   workspace or envelope) and at its end every error is inside
@@ -44,6 +47,7 @@ from marine_formation_env.scenarios import ScenarioConfig
 __all__ = [
     "SETTLING_BANDS",
     "SUCCESS_BANDS",
+    "action_change",
     "episode_metrics",
     "goal_errors",
     "path_coordinates_along",
@@ -138,6 +142,14 @@ def _surge_outside_time(traj: Trajectory, cfg: ScenarioConfig) -> float:
     return float(np.sum(np.diff(traj.t)[outside]))
 
 
+def action_change(actions: np.ndarray) -> float:
+    """Mean |a_k − a_{k−1}| of ``(T, n, A)`` normalized actions over k ≥ 1, vessels and components (0 if T < 2)."""
+    actions = np.asarray(actions, dtype=float)
+    if len(actions) < 2:
+        return 0.0
+    return float(np.mean(np.abs(np.diff(actions, axis=0))))
+
+
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
@@ -174,6 +186,7 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
         "time_outside_speed_band": float(outside.sum() * cfg.dt),
         "surge_outside_band_time": _surge_outside_time(traj, cfg),
         "effort": float(np.mean(np.square(traj.actions))) if traj.actions.size else 0.0,
+        "action_change": action_change(traj.actions),
         "min_separation": float(separation.min()),
         "terminated": traj.terminated,
         "collision": traj.collision,

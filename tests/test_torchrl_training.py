@@ -126,6 +126,8 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
+        ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
+        ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -166,6 +168,33 @@ def test_training_sets_torch_s_threads_from_the_config(tmp_path, monkeypatch):
         args += ["--set", item]
     assert main(args) == 0
     assert calls == [2]
+
+
+def test_the_linear_schedule_falls_to_zero_over_whichever_budget_runs_out_first():
+    cfg = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000, "minutes": 10}, seed=0)
+    assert trainer.learning_rate(cfg, 0.0, 0) == 1e-3
+    assert trainer.learning_rate(cfg, 150.0, 100) == pytest.approx(0.75e-3)  # a quarter of the 600 s used
+    assert trainer.learning_rate(cfg, 60.0, 500) == pytest.approx(0.5e-3)  # half of the frames used
+    assert trainer.learning_rate(cfg, 900.0, 0) == 0.0  # past the budget: floored, never negative
+    frames_only = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000}, seed=0)
+    assert trainer.learning_rate(frames_only, 1e6, 250) == pytest.approx(0.75e-3)
+    assert trainer.learning_rate(resolve({"lr": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
+
+
+def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
+    out = tmp_path / "run"
+    args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    # two iterations of two minibatch updates per epoch, 3 epochs: without a stop, 6 updates each
+    for item in [*TINY, "epochs=3", "lr=1e-3", "lr_schedule=linear", "target_kl=1e-9"]:
+        args += ["--set", item]
+    assert main(args) == 0
+    rows = (out / "progress.csv").read_text().splitlines()
+    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,lr,kl,updates"
+    lr = [float(r.split(",")[4]) for r in rows[1:]]
+    updates = [int(r.split(",")[6]) for r in rows[1:]]
+    assert lr[0] == 1e-3 and lr[1] == pytest.approx(0.5e-3)  # the second iteration starts half-way (40 of 80 frames)
+    # a KL limit of 1e-9 is passed by the first update that changes the policy: the epochs stop there
+    assert all(1 <= u < 6 for u in updates), updates
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

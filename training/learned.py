@@ -160,6 +160,10 @@ def evaluate_run(
         "reference_return": float(np.mean([m["return"] for m in reference])),
         "learned_success": float(np.mean([m["success"] for m in learned])),
         "reference_success": float(np.mean([m["success"] for m in reference])),
+        "learned_returns": [m["return"] for m in learned],
+        "reference_returns": [m["return"] for m in reference],
+        "learned_action_change": float(np.mean([m["action_change"] for m in learned])),
+        "reference_action_change": float(np.mean([m["action_change"] for m in reference])),
     }
     atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
     return summary

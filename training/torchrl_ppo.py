@@ -27,6 +27,8 @@ nest; unknown keys and bad values are refused by name):
 | ``minutes`` | wall-clock limit of the run (stops after the iteration that passes it), or null | null |
 | ``hidden`` | hidden layer sizes of the policy and the critic | ``[64, 64]`` |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
+| ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
+| ``target_kl`` | stop an iteration's epochs once a minibatch's approximate KL exceeds 1.5 × this, or null | null |
 | ``gamma``, ``lmbda`` | discount, GAE λ | 0.99, 0.95 |
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
@@ -43,6 +45,18 @@ advantages of each minibatch; ``normalize_reward`` divides the rewards the
 critic and the advantages see by the running standard deviation of the
 discounted return (clipped to ±10). The env's reward, the logged
 ``mean_reward`` and the evaluation are unchanged.
+
+With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
+``total_frames`` runs out first: before each iteration the rate is
+``lr · (1 − max(elapsed / minutes, frames / total_frames))``, as SB3's linear
+schedule over ``progress_remaining``, with wall time counted because the
+benchmarks give a run minutes, not frames. ``target_kl`` is SB3's early
+stopping: the magnitude of the minibatch's mean of TorchRL's ``kl_approx``
+diagnostic (log π_old − log π_new, an estimator that can come out below 0 on
+one minibatch) is compared with 1.5 × ``target_kl`` after each
+minibatch update, and the iteration's remaining epochs are skipped once it is
+above. Both are there because the constant-rate policy gets worse after about
+20 M vessel-steps (docs/results.md, "Over training seeds").
 
 The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 (the policy network's weights and what is needed to rebuild it),
@@ -86,6 +100,7 @@ __all__ = [
     "DEFAULTS",
     "RewardScaler",
     "TorchPolicy",
+    "learning_rate",
     "load_torch_policy",
     "make_collector",
     "resolve",
@@ -104,6 +119,8 @@ DEFAULTS: dict[str, Any] = {
     "minutes": None,
     "hidden": [64, 64],
     "lr": 3e-4,
+    "lr_schedule": "constant",
+    "target_kl": None,
     "max_grad_norm": 1.0,
     "gamma": 0.99,
     "lmbda": 0.95,
@@ -119,6 +136,7 @@ DEFAULTS: dict[str, Any] = {
 }
 
 ALGOS = ("mappo", "ippo")
+LR_SCHEDULES = ("constant", "linear")
 POLICY_FILE = "policy.pt"
 
 
@@ -144,6 +162,10 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
+    if cfg["lr_schedule"] not in LR_SCHEDULES:
+        raise TrainConfigError(f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {cfg['lr_schedule']!r}")
+    if cfg["target_kl"] is not None:
+        cfg["target_kl"] = _positive("target_kl", cfg["target_kl"])
     if cfg["threads"] is not None:
         cfg["threads"] = _whole("threads", cfg["threads"], 1)
     cfg["hidden"] = _hidden(cfg["hidden"])
@@ -443,14 +465,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 data, params=loss.critic_network_params, target_params=loss.target_critic_network_params
             )
         buffer.extend(data.reshape(-1))
-        for _ in range(cfg["epochs"]):
-            for _ in range(cfg["frames_per_batch"] // cfg["minibatch_size"]):
-                values = loss(buffer.sample())
-                total = values["loss_objective"] + values["loss_critic"] + values["loss_entropy"]
-                optim.zero_grad()
-                total.backward()
-                torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
-                optim.step()
+        rate = learning_rate(cfg, time.perf_counter() - begin, frames)
+        for group in optim.param_groups:
+            group["lr"] = rate
+        kl, updates = _ppo_epochs(loss, optim, buffer, cfg)
         if normalize:  # after the epochs: each batch trains with the statistics it was collected with
             for net in (actor.module[0].module, critic.module):
                 net[0].update(data.get(("vessel", "observation")))
@@ -463,6 +481,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "vessel_steps": frames * n,
                 "seconds": round(elapsed, 3),
                 "mean_reward": mean_reward,
+                "lr": rate,
+                "kl": kl,
+                "updates": updates,
             }
         )
         bar.update(data.numel())
@@ -479,6 +500,46 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     summary = evaluate_run(out, policy, cfg, int(last["frames"]), int(last["vessel_steps"]), float(last["seconds"]))
     env.close()
     return summary
+
+
+def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
+    """The Adam rate of the next iteration: ``lr``, or with ``lr_schedule: linear`` ``lr`` times the budget left.
+
+    The budget left is ``1 − max(elapsed / (60·minutes), frames / total_frames)`` (``minutes`` null: frames
+    only), floored at 0.
+    """
+    if cfg["lr_schedule"] == "constant":
+        return float(cfg["lr"])
+    used = frames / cfg["total_frames"]
+    if cfg["minutes"] is not None:
+        used = max(used, elapsed / (60.0 * cfg["minutes"]))
+    return float(cfg["lr"]) * max(0.0, 1.0 - used)
+
+
+def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:
+    """The PPO epochs on one batch; returns the last minibatch's approximate KL and the number of updates.
+
+    With ``target_kl`` set, the epochs stop after the first minibatch whose ``|mean kl_approx|`` exceeds
+    1.5 × ``target_kl`` (SB3's rule).
+    """
+    import torch
+
+    kl, updates = float("nan"), 0
+    limit = None if cfg["target_kl"] is None else 1.5 * cfg["target_kl"]
+    for _ in range(cfg["epochs"]):
+        for _ in range(cfg["frames_per_batch"] // cfg["minibatch_size"]):
+            values = loss(buffer.sample())
+            total = values["loss_objective"] + values["loss_critic"] + values["loss_entropy"]
+            optim.zero_grad()
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
+            optim.step()
+            updates += 1
+            if "kl_approx" in values.keys():
+                kl = abs(float(values["kl_approx"].detach().mean()))
+            if limit is not None and kl > limit:
+                return kl, updates
+    return kl, updates
 
 
 def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
@@ -521,7 +582,8 @@ def _save(
     )
     atomic_write_bytes(out / POLICY_FILE, buffer.getvalue())
     text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=["frames", "vessel_steps", "seconds", "mean_reward"])
+    columns = ["frames", "vessel_steps", "seconds", "mean_reward", "lr", "kl", "updates"]
+    writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
     writer.writerows(rows)
     atomic_write_text(out / "progress.csv", text.getvalue())

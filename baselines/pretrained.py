@@ -1,0 +1,417 @@
+"""Pretrained policies shipped with the project, runnable with numpy alone.
+
+Each policy is one file, ``baselines/pretrained/NAME.npz``: the weights of its
+network as numpy arrays and a JSON header (``meta``) saying what it expects
+(scenario, env overrides, action level, team size, observation layout) and
+how it was trained and measured. No torch, SB3 or TorchRL is needed to run
+one::
+
+    from baselines.pretrained import load_pretrained
+    policy, info = load_pretrained("paper_speed")
+    env = marine_formation_env.parallel_env(info.scenario, **info.env_kwargs)
+    observations, _ = env.reset(seed=0)
+    actions = policy.act(observations)
+
+and from the command line, next to the reference::
+
+    python -m baselines.evaluate --policy pretrained:paper_speed --policy reference --episodes 10
+    python -m baselines.evaluate --list-pretrained
+
+A policy takes another scenario with the same observation layout and action
+level (that is how generalization is measured: ``--scenario acoustic`` with
+``pretrained:paper_speed``); a team size, action level or layout it cannot
+take is refused by :func:`check_compatible`, naming both sides.
+
+Two network kinds:
+
+``mlp``
+    ``obs → (obs − mean) / std, clipped to ±clip → [Linear → tanh]* → Linear → squash``,
+    the observation statistics of SB3's ``VecNormalize`` or of
+    ``training.torchrl_ppo``'s running norm folded in; ``squash`` is ``clip``
+    (SB3's deterministic action, the Gaussian's mean clipped to the action
+    space) or ``tanh`` (TorchRL's tanh-squashed Gaussian's mode). It exists
+    for one team size.
+
+Files are written by :func:`export_run` (from an SB3 ``training.train`` run or
+a ``training.torchrl_ppo`` run), atomically; ``python -m baselines.pretrained
+export RUN --name NAME`` does it from the shell.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines.rollout import BatchPolicy
+from marine_formation_env import ENV_ID
+from marine_formation_env.atomic import atomic_write_bytes
+from marine_formation_env.scenarios import ScenarioConfig
+
+__all__ = [
+    "FORMAT",
+    "PRETRAINED_DIR",
+    "MLPPolicy",
+    "PretrainedInfo",
+    "check_compatible",
+    "export_run",
+    "list_pretrained",
+    "load_pretrained",
+    "save_pretrained",
+]
+
+#: Where the shipped policies live.
+PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+#: Version of the file format (the header's ``format``).
+FORMAT = 1
+KINDS = ("mlp",)
+SQUASHES = ("clip", "tanh")
+
+
+@dataclass(frozen=True)
+class PretrainedInfo:
+    """What a pretrained policy expects and how it came about (the file's JSON header).
+
+    Attributes:
+        name: the policy's name (its file's stem).
+        scenario, env_kwargs: what it was trained on; the default of an evaluation.
+        action_level: ``force``, ``guidance`` or ``speed``.
+        n_vessels: the team size it takes, or None (any).
+        observation_dim: the length of the observation it takes (None: any team size).
+        action_dim: the length of its action.
+        env_id: the env version whose observation layout it was trained on.
+        kind: ``mlp``.
+        description: one line for ``--list-pretrained``.
+        training: how it was trained (pipeline, seed, minutes, vessel-steps, commit, config).
+        evaluation: what it measured at export (return, success, reference's return, seeds).
+    """
+
+    name: str
+    scenario: str
+    env_kwargs: dict[str, Any]
+    action_level: str
+    n_vessels: int | None
+    observation_dim: int | None
+    action_dim: int
+    env_id: str = ENV_ID
+    kind: str = "mlp"
+    description: str = ""
+    training: dict[str, Any] = field(default_factory=dict)
+    evaluation: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> str:
+        return json.dumps({"format": FORMAT, **self.__dict__}, sort_keys=True)
+
+
+class MLPPolicy(BatchPolicy):
+    """A deterministic tanh MLP over one vessel's observation (every vessel, shared weights).
+
+    Args:
+        weights, biases: layer ``k`` maps ``x ↦ x @ weights[k] + biases[k]``; tanh between layers.
+        mean, std, clip: the observation normalization ``clip((obs − mean) / std, ±clip)``.
+        squash: ``clip`` (to [−1, 1]) or ``tanh``, applied to the first ``action_dim`` outputs.
+    """
+
+    def __init__(
+        self,
+        weights: Sequence[np.ndarray],
+        biases: Sequence[np.ndarray],
+        mean: np.ndarray,
+        std: np.ndarray,
+        clip: float,
+        squash: str,
+        action_dim: int,
+    ) -> None:
+        if squash not in SQUASHES:
+            raise ValueError(f"squash must be one of {list(SQUASHES)}, got {squash!r}")
+        self.weights = [np.asarray(w, dtype=np.float64) for w in weights]
+        self.biases = [np.asarray(b, dtype=np.float64) for b in biases]
+        self.mean = np.asarray(mean, dtype=np.float64)
+        self.std = np.asarray(std, dtype=np.float64)
+        self.clip = float(clip)
+        self.squash = squash
+        self.observation_dim = int(self.weights[0].shape[0])
+        self.action_dim = int(action_dim)
+        #: the header of the file it was loaded from (:func:`load_pretrained`), else None
+        self.info: PretrainedInfo | None = None
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.shape[-1] != self.observation_dim:
+            raise ValueError(f"observations of size {obs.shape[-1]} given, this policy takes {self.observation_dim}")
+        x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
+        for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            x = x @ w + b
+            if k < len(self.weights) - 1:
+                x = np.tanh(x)
+        out = x[..., : self.action_dim]
+        out = np.tanh(out) if self.squash == "tanh" else np.clip(out, -1.0, 1.0)
+        return out.astype(np.float32)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays of its file."""
+        out = {"mean": self.mean, "std": self.std, "clip": np.array(self.clip), "squash": np.array(self.squash)}
+        for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            out[f"w{k}"], out[f"b{k}"] = w, b
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], action_dim: int) -> MLPPolicy:
+        layers = sum(1 for key in arrays if key.startswith("w"))
+        return cls(
+            [arrays[f"w{k}"] for k in range(layers)],
+            [arrays[f"b{k}"] for k in range(layers)],
+            arrays["mean"],
+            arrays["std"],
+            float(arrays["clip"]),
+            str(arrays["squash"]),
+            action_dim,
+        )
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def _path(name: str, folder: Path | None = None) -> Path:
+    return (folder or PRETRAINED_DIR) / f"{name}.npz"
+
+
+def save_pretrained(policy: MLPPolicy, info: PretrainedInfo, folder: Path | None = None) -> Path:
+    """Write ``policy`` and ``info`` to ``folder/NAME.npz`` atomically; returns the path."""
+    if info.kind not in KINDS:
+        raise ValueError(f"kind must be one of {list(KINDS)}, got {info.kind!r}")
+    target = _path(info.name, folder)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    buffer = io.BytesIO()
+    arrays: dict[str, Any] = {"meta": np.array(info.to_json()), **policy.arrays()}
+    np.savez_compressed(buffer, **arrays)
+    atomic_write_bytes(target, buffer.getvalue())
+    return target
+
+
+def _read(path: Path) -> tuple[dict[str, np.ndarray], PretrainedInfo]:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+        header = json.loads(str(arrays.pop("meta")))
+        version = header.pop("format")
+        if version != FORMAT:
+            raise ValueError(f"file format {version}, this version reads {FORMAT}")
+        info = PretrainedInfo(**header)
+    except (OSError, KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{path} is not a readable pretrained policy ({type(err).__name__}: {err})") from None
+    return arrays, info
+
+
+def list_pretrained(folder: Path | None = None) -> list[PretrainedInfo]:
+    """The headers of every policy in ``folder`` (default: the shipped ones), sorted by name."""
+    return [_read(path)[1] for path in sorted((folder or PRETRAINED_DIR).glob("*.npz"))]
+
+
+def load_pretrained(name: str, folder: Path | None = None) -> tuple[MLPPolicy, PretrainedInfo]:
+    """The policy called ``name`` and its header.
+
+    Raises:
+        ValueError: no such policy (the message lists the shipped ones) or an unreadable file.
+    """
+    path = _path(name, folder)
+    if not path.is_file():
+        known = [info.name for info in list_pretrained(folder)]
+        raise ValueError(f"no pretrained policy {name!r}; shipped: {known}")
+    arrays, info = _read(path)
+    policy = MLPPolicy.from_arrays(arrays, info.action_dim)
+    policy.info = info
+    return policy, info
+
+
+def check_compatible(info: PretrainedInfo, config: ScenarioConfig, observation_dim: int) -> None:
+    """Refuse (``ValueError``) a scenario whose team size, action level or observation layout ``info`` cannot take.
+
+    Another scenario with the same layout and level is accepted: that is a generalization test.
+    """
+    where = f"pretrained policy {info.name!r} (trained on {info.scenario!r}"
+    if info.env_id != ENV_ID:
+        raise ValueError(f"{where} with {info.env_id}) reads another observation layout than {ENV_ID}")
+    if info.action_level != config.action_level:
+        raise ValueError(
+            f"{where}) acts at action_level {info.action_level!r}, this scenario has {config.action_level!r}; "
+            f"pass --set action_level={info.action_level}"
+        )
+    if info.n_vessels is not None and info.n_vessels != config.n_vessels:
+        raise ValueError(
+            f"{where}) takes teams of {info.n_vessels} vessels, this scenario has n_vessels = {config.n_vessels}"
+        )
+    if info.observation_dim is not None and info.observation_dim != observation_dim:
+        raise ValueError(
+            f"{where}) takes observations of size {info.observation_dim}, this scenario gives {observation_dim}"
+        )
+
+
+# ----------------------------------------------------------------------------- export
+
+
+def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
+    """The deterministic network of an SB3 ``training.train`` run (MlpPolicy, tanh) as an :class:`MLPPolicy`."""
+    from torch import nn
+
+    from training.learned import load_learned_policy
+
+    policy, config = load_learned_policy(run)
+    model = policy.model
+    net = model.policy
+    layers = [m for m in net.mlp_extractor.policy_net if isinstance(m, nn.Linear)] + [net.action_net]
+    activations = {type(m) for m in net.mlp_extractor.policy_net if not isinstance(m, nn.Linear)}
+    if activations - {nn.Tanh}:
+        raise ValueError(f"{run}: only tanh networks can be exported, found {sorted(a.__name__ for a in activations)}")
+    if getattr(net, "share_features_extractor", True) is False or net.mlp_extractor.policy_net is None:
+        raise ValueError(f"{run}: not an MlpPolicy")
+    dim = policy.observation_dim
+    if policy.normalizer is not None and policy.normalizer.norm_obs:
+        rms = policy.normalizer.obs_rms
+        mean, std = rms.mean, np.sqrt(rms.var + policy.normalizer.epsilon)
+        clip = float(policy.normalizer.clip_obs)
+    else:
+        mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
+    weights = [m.weight.detach().double().numpy().T.copy() for m in layers]
+    biases = [m.bias.detach().double().numpy().copy() for m in layers]
+    return MLPPolicy(weights, biases, mean, std, clip, "clip", policy.action_dim), config
+
+
+def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
+    """The deterministic network of a ``training.torchrl_ppo`` run (running norm, shared MLP, tanh) as an MLPPolicy."""
+    from torch import nn
+
+    from training.torchrl_ppo import load_torch_policy
+
+    policy, config = load_torch_policy(run)
+    trunk = policy.trunk
+    dim = policy.observation_dim
+    if len(trunk) == 2:
+        norm = trunk[0]
+        mean = norm.mean.double().numpy()
+        std = np.sqrt(norm.var.double().numpy() + 1e-8)
+        clip = 10.0
+    else:
+        mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
+    mlp = trunk[-1]
+    # a MultiAgentMLP with shared parameters keeps them in ``params`` (keys "0", "2", ...: the Linear layers'
+    # indices in its empty template network, tanh between them)
+    template = mlp._empty_net
+    others = {type(m) for m in template if not isinstance(m, nn.Linear)}
+    if others - {nn.Tanh}:
+        raise ValueError(f"{run}: only tanh networks can be exported, found {sorted(a.__name__ for a in others)}")
+    indices = [str(k) for k, m in enumerate(template) if isinstance(m, nn.Linear)]
+    params = mlp.params
+    weights = [params[k, "weight"].detach().double().numpy().T.copy() for k in indices]
+    biases = [params[k, "bias"].detach().double().numpy().copy() for k in indices]
+    return MLPPolicy(weights, biases, mean, std, clip, "tanh", policy.action_dim), config
+
+
+def export_run(
+    run: str | Path,
+    name: str,
+    description: str = "",
+    folder: Path | None = None,
+    training: dict[str, Any] | None = None,
+    evaluation: dict[str, Any] | None = None,
+) -> Path:
+    """Export the policy of a run folder (SB3 ``training.train`` or ``training.torchrl_ppo``) as ``NAME.npz``.
+
+    The header takes the scenario, env overrides and team size from the run's
+    config; ``training`` and ``evaluation`` add what the caller knows (the
+    run's ``evaluation.json`` is read if present).
+    """
+    run = Path(run)
+    if not name.replace("_", "").isalnum():
+        raise ValueError(f"a pretrained policy's name is letters, digits and underscores, got {name!r}")
+    if (run / "policy.pt").is_file():
+        policy, config = _torchrl_network(run)
+        pipeline = "torchrl"
+    else:
+        policy, config = _sb3_network(run)
+        pipeline = "sb3"
+    from marine_formation_env.scenarios import make_config
+
+    scenario, env_kwargs = config["scenario"], dict(config["env_kwargs"])
+    cfg = make_config(scenario, **env_kwargs)
+    measured = dict(evaluation or {})
+    summary = (run if run.is_dir() else run.parent) / "evaluation.json"
+    if not measured and summary.is_file():
+        measured = json.loads(summary.read_text())
+    info = PretrainedInfo(
+        name=name,
+        scenario=scenario,
+        env_kwargs=json.loads(json.dumps(env_kwargs)),
+        action_level=cfg.action_level,
+        n_vessels=cfg.n_vessels,
+        observation_dim=policy.observation_dim,
+        action_dim=policy.action_dim,
+        description=description,
+        training={"pipeline": pipeline, "seed": config.get("seed"), **(training or {})},
+        evaluation=measured,
+    )
+    return save_pretrained(policy, info, folder)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def format_listing(infos: Sequence[PretrainedInfo]) -> str:
+    """The table of ``baselines.evaluate --list-pretrained``."""
+    rows = [["name", "scenario", "level", "vessels", "pipeline", "return (reference)", "success", "description"]]
+    for info in infos:
+        ev = info.evaluation
+        ret = (
+            f"{ev['learned_return']:.1f} ({ev['reference_return']:.1f})"
+            if "learned_return" in ev and "reference_return" in ev
+            else "-"
+        )
+        success = f"{ev['learned_success']:.0%}" if "learned_success" in ev else "-"
+        rows.append(
+            [
+                info.name,
+                info.scenario,
+                info.action_level,
+                "any" if info.n_vessels is None else str(info.n_vessels),
+                str(info.training.get("pipeline", "-")),
+                ret,
+                success,
+                info.description,
+            ]
+        )
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(row, widths, strict=True)).rstrip() for row in rows)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from marine_formation_env.cli import ArgumentParser
+
+    parser = ArgumentParser(prog="python -m baselines.pretrained", description="List or export pretrained policies.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="list the shipped policies")
+    export = sub.add_parser("export", help="export a run folder's policy as baselines/pretrained/NAME.npz")
+    export.add_argument("run", type=Path, help="a training.train or training.torchrl_ppo run folder")
+    export.add_argument("--name", required=True)
+    export.add_argument("--description", default="")
+    export.add_argument("--folder", type=Path, default=None, help="where to write (default: the shipped folder)")
+    args = parser.parse_args(argv)
+    if args.command == "list":
+        print(format_listing(list_pretrained()))
+        return 0
+    try:
+        path = export_run(args.run, args.name, args.description, args.folder)
+    except (ValueError, FileNotFoundError) as err:
+        print(f"python -m baselines.pretrained: error: {err}", file=sys.stderr)
+        return 2
+    print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
