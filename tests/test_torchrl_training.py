@@ -58,7 +58,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         args += ["--set", item]
     assert main(args) == 0
     progress = (out / "progress.csv").read_text().splitlines()
-    assert progress[0] == "frames,vessel_steps,seconds,mean_reward" and len(progress) == 3  # two iterations
+    assert progress[0] == "frames,vessel_steps,seconds,mean_reward,lr,kl,updates" and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["frames"] == 80 and summary["vessel_steps"] == 240
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
