@@ -61,7 +61,8 @@ above. Both are there because the constant-rate policy gets worse after about
 The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 (the policy network's weights and what is needed to rebuild it),
 ``progress.csv`` (per iteration: frames, vessel-steps, seconds, the mean
-training reward per vessel-step) and ``evaluation.json`` (the learned
+training reward per vessel-step, the learning rate, the last approximate KL
+and the number of minibatch updates) and ``evaluation.json`` (the learned
 policy's and the reference's mean return over the same seeds). Every file is
 written atomically. ``python -m baselines.evaluate --policy RUN_FOLDER``
 evaluates the policy next to the reference.
