@@ -58,7 +58,8 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         args += ["--set", item]
     assert main(args) == 0
     progress = (out / "progress.csv").read_text().splitlines()
-    assert progress[0] == "frames,vessel_steps,seconds,mean_reward,lr,kl,updates" and len(progress) == 3  # two iterations
+    header = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates"
+    assert progress[0] == header and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["frames"] == 80 and summary["vessel_steps"] == 240
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
@@ -189,9 +190,9 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
         args += ["--set", item]
     assert main(args) == 0
     rows = (out / "progress.csv").read_text().splitlines()
-    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,lr,kl,updates"
-    lr = [float(r.split(",")[4]) for r in rows[1:]]
-    updates = [int(r.split(",")[6]) for r in rows[1:]]
+    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates"
+    lr = [float(r.split(",")[6]) for r in rows[1:]]
+    updates = [int(r.split(",")[8]) for r in rows[1:]]
     assert lr[0] == 1e-3 and lr[1] == pytest.approx(0.5e-3)  # the second iteration starts half-way (40 of 80 frames)
     # a KL limit of 1e-9 is passed by the first update that changes the policy: the epochs stop there
     assert all(1 <= u < 6 for u in updates), updates
@@ -230,6 +231,19 @@ def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_
     expected = np.clip((every[2:7] - mean) / np.sqrt(var + 1e-8), -10, 10)
     np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-4)
     assert norm(torch.full((1, 4), 1e6)).max() == 10.0  # clipped
+
+
+def test_episode_returns_are_the_sums_of_each_vessel_s_rewards_between_done_flags():
+    tracker = trainer.EpisodeReturns()
+    reward = torch.arange(2 * 3 * 2, dtype=torch.float32).reshape(2, 3, 2, 1)  # 2 formations, 3 steps, 2 vessels
+    done = torch.tensor([[False, True, False], [False, False, False]]).unsqueeze(-1)
+    # formation 0 ends after its second step: vessels' sums 0 + 2 and 1 + 3
+    assert tracker(reward, done) == [2.0, 4.0]
+    done = torch.tensor([[True, False, False], [False, False, True]]).unsqueeze(-1)
+    # the next batch: formation 0 ends after its first step (its third step of before, 4 and 5, plus 0 and 1);
+    # formation 1 after its third step of this batch: the six steps of both batches
+    ended = tracker(reward, done)
+    assert ended == [4.0 + 0.0, 5.0 + 1.0, 2 * (6.0 + 8.0 + 10.0), 2 * (7.0 + 9.0 + 11.0)]
 
 
 def test_reward_scaler_divides_by_the_std_of_the_discounted_returns_it_has_seen():

@@ -460,6 +460,18 @@ def test_smoke_run_writes_the_run_folder(smoke_run):
     assert model.action_space.shape == (1,)
 
 
+def test_smoke_run_logs_its_learning_curve(smoke_run):
+    with (smoke_run / "progress.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    # 2 formations × 3 vessels = 6 entries × 64 steps per rollout; 600 vessel-steps take 2 rollouts
+    assert [int(r["vessel_steps"]) for r in rows] == [384, 768]
+    # episodes of 20 s / 0.5 s = 40 steps end at steps 40 (rollout 1: 6 of them), 80 and 120 (rollout 2: 12)
+    assert [int(r["episodes"]) for r in rows] == [6, 12]
+    returns = [float(r["episode_return"]) for r in rows]
+    assert all(-40.0 * 10.0 < value < 0.0 for value in returns)  # every per-step cost lies in (0, 10]
+    assert float(rows[0]["seconds"]) < float(rows[1]["seconds"])
+
+
 def test_smoke_run_evaluations_against_reference(smoke_run):
     with (smoke_run / "evaluations.csv").open() as handle:
         rows = list(csv.DictReader(handle))

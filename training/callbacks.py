@@ -6,6 +6,8 @@ fsync, rename), so a run killed at any instant leaves readable files.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import pickle
 import sys
@@ -25,7 +27,9 @@ from training.learned import ModelPolicy, load_learned_policy
 
 __all__ = [
     "EVAL_SEED",
+    "PROGRESS_COLUMNS",
     "AtomicCheckpointCallback",
+    "ProgressLog",
     "ReferenceEvalCallback",
     "StopRequest",
     "WallClockBudget",
@@ -198,6 +202,73 @@ class StopRequest(BaseCallback):
 
     def _on_step(self) -> bool:
         return not self.requested
+
+
+#: Columns of a run folder's ``progress.csv`` (SB3 runs; TorchRL runs have these and more).
+PROGRESS_COLUMNS = ("vessel_steps", "seconds", "episode_return", "episodes")
+
+
+class ProgressLog(BaseCallback):
+    """The learning curve of a run: ``out/progress.csv``, one row per rollout.
+
+    ``episode_return`` is the mean return (per vessel, the env's raw reward,
+    as the evaluation's ``return``) of the training episodes that ended during
+    the rollout, from the ``VecMonitor`` under the normalization (the
+    stochastic policy's, on the training distribution of initial states);
+    empty when none ended. ``seconds`` counts from the start of this
+    ``learn`` call (plus the last row's on a resumed run). The file is
+    rewritten atomically at most every ``every`` seconds and at the end.
+    """
+
+    def __init__(self, out: Path, every: float = 10.0) -> None:
+        super().__init__()
+        self.path = Path(out) / "progress.csv"
+        self.every = float(every)
+        self.rows: list[dict[str, Any]] = []
+        self.start = self.written = 0.0
+        self.offset = 0.0
+        self.pending: list[float] = []
+
+    def resume(self, steps: int) -> None:
+        """Keep the rows of an earlier run up to ``steps`` vessel-steps (a resumed run)."""
+        if self.path.is_file():
+            with self.path.open(newline="") as handle:
+                self.rows = [row for row in csv.DictReader(handle) if int(row["vessel_steps"]) <= steps]
+            self.offset = float(self.rows[-1]["seconds"]) if self.rows else 0.0
+
+    def _on_training_start(self) -> None:
+        self.start = self.written = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", ()):
+            if "episode" in info:  # VecMonitor's record of an episode that just ended
+                self.pending.append(float(info["episode"]["r"]))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        fresh, self.pending = self.pending, []
+        now = time.perf_counter()
+        self.rows.append(
+            {
+                "vessel_steps": int(self.num_timesteps),
+                "seconds": round(self.offset + now - self.start, 3),
+                "episode_return": float(np.mean(fresh)) if fresh else "",
+                "episodes": len(fresh),
+            }
+        )
+        if now - self.written >= self.every:
+            self._write()
+            self.written = now
+
+    def _on_training_end(self) -> None:
+        self._write()
+
+    def _write(self) -> None:
+        text = io.StringIO()
+        writer = csv.DictWriter(text, fieldnames=list(PROGRESS_COLUMNS))
+        writer.writeheader()
+        writer.writerows(self.rows)
+        run_folder.write_bytes(self.path, text.getvalue().encode())
 
 
 class WallClockBudget(BaseCallback):

@@ -76,6 +76,7 @@ ARTIFACTS = (
     "best_vecnormalize.pkl",
     "best_model.json",
     "evaluations.csv",
+    "progress.csv",
     "tb",
     "checkpoints",
     JOURNAL,

@@ -61,8 +61,9 @@ above. Both are there because the constant-rate policy gets worse after about
 The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 (the policy network's weights and what is needed to rebuild it),
 ``progress.csv`` (per iteration: frames, vessel-steps, seconds, the mean
-training reward per vessel-step, the learning rate, the last approximate KL
-and the number of minibatch updates) and ``evaluation.json`` (the learned
+training reward per vessel-step, the mean return per vessel of the training
+episodes that ended in the batch and their number (counted per vessel), the
+learning rate, the last approximate KL and the number of minibatch updates) and ``evaluation.json`` (the learned
 policy's and the reference's mean return over the same seeds). Every file is
 written atomically. ``python -m baselines.evaluate --policy RUN_FOLDER``
 evaluates the policy next to the reference.
@@ -99,6 +100,7 @@ from training.config import (
 
 __all__ = [
     "DEFAULTS",
+    "EpisodeReturns",
     "RewardScaler",
     "TorchPolicy",
     "learning_rate",
@@ -268,6 +270,36 @@ class RewardScaler:
             return (reward / torch.sqrt(self.stats.var + 1e-8)).clamp(-10.0, 10.0)
 
 
+class EpisodeReturns:
+    """The returns of the training episodes that end in each batch (the learning curve of ``progress.csv``).
+
+    Each (formation, vessel) stream sums the env's raw reward; when the
+    formation's episode ends (termination or truncation) the sums of its
+    vessels are recorded and reset. The streams carry on across batches, as
+    the collector's formations do.
+    """
+
+    def __init__(self) -> None:
+        self.sums: Any = None
+
+    def __call__(self, reward: Any, done: Any) -> list[float]:
+        """Per-vessel returns of the episodes ending in this batch (``reward`` [B, T, n, 1], ``done`` [B, T, 1])."""
+        import torch
+
+        with torch.no_grad():
+            reward = reward[..., 0].double()
+            if self.sums is None:
+                self.sums = torch.zeros_like(reward[:, 0])
+            ended: list[float] = []
+            for t in range(reward.shape[1]):
+                self.sums += reward[:, t]
+                flags = done[:, t, 0]
+                if bool(flags.any()):
+                    ended.extend(self.sums[flags].flatten().tolist())
+                    self.sums[flags] = 0.0
+            return ended
+
+
 def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[int], normalize: bool = False) -> Any:
     """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → TanhNormal."""
     import torch
@@ -417,6 +449,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
+    episodes = EpisodeReturns()
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize)
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
@@ -455,6 +488,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     for data in collector:
         raw_reward = data.get(("next", "vessel", "reward"))
         mean_reward = float(raw_reward.mean())  # logged as the env gave it, before any scaling
+        ended = episodes(raw_reward, data.get(("next", "done")))
         if scaler is not None:
             data.set(("next", "vessel", "reward"), scaler(raw_reward, data.get(("next", "done"))))
         # the formation's done flags for every vessel, as the loss reads them per agent
@@ -482,6 +516,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "vessel_steps": frames * n,
                 "seconds": round(elapsed, 3),
                 "mean_reward": mean_reward,
+                "episode_return": float(np.mean(ended)) if ended else "",
+                "episodes": len(ended),
                 "lr": rate,
                 "kl": kl,
                 "updates": updates,
@@ -583,7 +619,7 @@ def _save(
     )
     atomic_write_bytes(out / POLICY_FILE, buffer.getvalue())
     text = io.StringIO()
-    columns = ["frames", "vessel_steps", "seconds", "mean_reward", "lr", "kl", "updates"]
+    columns = ["frames", "vessel_steps", "seconds", "mean_reward", "episode_return", "episodes", "lr", "kl", "updates"]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
     writer.writerows(rows)

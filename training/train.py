@@ -13,8 +13,10 @@ The run folder gets ``config.yaml`` (the resolved config, with the seed),
 statistics), ``best_model.zip`` + ``best_vecnormalize.pkl`` (best evaluation
 against the reference; ``best_model.json`` records its score and step),
 ``checkpoints/`` (``model_<N>_steps.zip`` + ``model_vecnormalize_<N>_steps.pkl``,
-including one at step 0), ``evaluations.csv`` and TensorBoard logs in ``tb/``
-(``tensorboard --logdir runs``).
+including one at step 0), ``evaluations.csv``, ``progress.csv`` (the learning
+curve: per rollout, vessel-steps, seconds and the mean return of the training
+episodes that ended, :class:`~training.callbacks.ProgressLog`) and TensorBoard
+logs in ``tb/`` (``tensorboard --logdir runs``).
 
 The run folder never holds half-written files: every file above is written
 to a temporary file in the same folder, flushed and fsync-ed, then renamed
@@ -26,14 +28,14 @@ Rules:
 
 * A new run refuses a folder that holds anything of another run
   (``config.yaml``, ``model.zip``, ``vecnormalize.pkl``, ``best_model.*``,
-  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``tb/``, ``checkpoints/``);
+  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``progress.csv``, ``tb/``, ``checkpoints/``);
   ``--overwrite`` removes those first (only once the new config has been
   checked, by building the algorithm on the real env).
 * ``--resume`` continues from the newest *readable* checkpoint: empty,
   truncated or otherwise unreadable checkpoint files are skipped with one line
   each saying why, and temporary files of interrupted writes are removed.
-  Rows of ``evaluations.csv`` after the checkpoint's step are dropped (the
-  file stays monotone in timesteps) and the best score is read back from
+  Rows of ``evaluations.csv`` and ``progress.csv`` after the checkpoint's
+  step are dropped (the files stay monotone in timesteps) and the best score is read back from
   ``best_model.json``, so ``best_model.zip`` is only replaced by a better
   model. The run's stored config is used; ``--config``/``--set`` may change
   only ``n_timesteps``, ``eval_freq``, ``eval_episodes`` and
@@ -215,7 +217,7 @@ def train(
     torch.set_num_threads(threads)
     from stable_baselines3.common.callbacks import CallbackList
 
-    from training.callbacks import AtomicCheckpointCallback, ReferenceEvalCallback, StopRequest
+    from training.callbacks import AtomicCheckpointCallback, ProgressLog, ReferenceEvalCallback, StopRequest
 
     out.mkdir(parents=True, exist_ok=True)
     for note in run_folder.recover(out):
@@ -232,7 +234,10 @@ def train(
         text = yaml.safe_dump({ENV_ID: config_record}, sort_keys=False)
         run_folder.write_bytes(out / "config.yaml", text.encode())
     stop = StopRequest()
-    callbacks: list[Any] = [stop]
+    log = ProgressLog(out)
+    if resume:
+        log.resume(int(model.num_timesteps))
+    callbacks: list[Any] = [stop, log]
     if resolved["checkpoint_freq"] > 0:
         if not resume:
             run_folder.save_checkpoint(model, out, 0)  # resumable from the start
