@@ -1,0 +1,466 @@
+"""The learned baselines, regenerated: train every row over seeds, evaluate next to the reference, write the table.
+
+One row per setting of the learning issue; each trains with its shipped
+config for its wall-clock budget on this machine, once per ``--seeds``, in
+its own process (one after the other, so no two compete for the cores), and
+is then evaluated deterministically by the engine of ``baselines.evaluate``
+on ``--episodes`` seeds (10 000 +) next to the paper's controller (and, over
+a lossy channel, the controller that extrapolates stale messages)::
+
+    # the whole table (hours): docs/results.md, the figures, the pretrained policies
+    python -m benchmarks.learned_baselines --seeds 0,1,2 --publish
+    # a smoke run of two rows: every budget 0.2 min, 2 evaluation episodes, nothing published
+    python -m benchmarks.learned_baselines --rows paper_speed,survey_speed --seeds 0 --minutes 0.2 --episodes 2
+
+=====================  =======  =====================================================
+row                    budget   config (``training/configs/``)
+=====================  =======  =====================================================
+``paper_speed``        15 min   ``torchrl/paper_speed_mappo.yaml`` (TorchRL MAPPO)
+``paper_guidance``     30 min   ``paper_guidance_ppo.yaml`` (SB3 PPO)
+``paper_force``        60 min   ``paper_force_ppo.yaml`` (SB3 PPO)
+``acoustic_speed``     30 min   ``acoustic_speed_ppo.yaml`` (SB3 PPO)
+``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO)
+``survey_speed``       30 min   ``survey_speed_ppo.yaml`` (SB3 PPO)
+=====================  =======  =====================================================
+
+The budgets of ``paper_*`` and ``survey_speed`` are the learning issue's; it
+gives none for the ``acoustic`` rows, which get 30 minutes.
+
+Per row the table gives, as mean ± sample standard deviation over the
+training seeds (each seed's number is the mean over the evaluation
+episodes): the learned return and the reference's, ``performance`` =
+R_reference / R_learned (≥ 0.9 is the target; returns are ≤ 0), the success
+rates, and the mean absolute action change per step Δa of both (smoothness:
+the learned one's must stay within 3× the reference's at ``speed``). Rows
+over a lossy channel also give the extrapolating reference, whose return and
+a 90 % success are their target. Every seed counts: no seed is dropped or
+picked.
+
+Everything goes to ``--out`` (default ``runs/learned_baselines``):
+``ROW/seed_S/`` run folders, ``learned_baselines.json`` (every run and every
+row's summary, rewritten atomically after each run), ``learning_curves.png``
+(per row the mean and the min–max over seeds of the training episodes'
+return against wall-clock minutes, the reference's evaluation return as a
+line) and ``episodes/ROW.png`` (one evaluation episode per row, the learned
+policy of the first seed beside the reference). A run whose folder already
+holds its evaluation (``result.json``) is not trained again, so an
+interrupted regeneration continues where it stopped; ``--fresh`` retrains.
+
+``--publish`` (full budgets only) also writes the table with the commit and
+the machine into ``docs/results.md`` (between the ``learned-baselines``
+markers), the figures into ``docs/``, and each row's policy of the first
+seed (not the best: the rule is fixed before the results are seen) into
+``baselines/pretrained/ROW.npz``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.training_throughput import parse_seeds
+from marine_formation_env.atomic import atomic_write_text
+from marine_formation_env.cli import ArgumentParser, int_at_least
+
+__all__ = ["ROWS", "Row", "format_table", "main", "row_summary", "run_row_seed"]
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = ROOT / "training" / "configs"
+MARKERS = ("<!-- learned-baselines:start -->", "<!-- learned-baselines:end -->")
+#: First evaluation seed (as ``training.learned.evaluate_run``).
+EVAL_SEED = 10_000
+#: The learning issue's targets.
+PERFORMANCE_TARGET, SUCCESS_TARGET, CHANNEL_SUCCESS_TARGET, SMOOTHNESS_TARGET = 0.9, 0.8, 0.9, 3.0
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of the table: a setting, its budget and the config that trains it."""
+
+    name: str
+    minutes: float
+    config: str  # relative to training/configs; torchrl/… runs training.torchrl_ppo, the rest training.train
+    note: str = ""
+
+    @property
+    def pipeline(self) -> str:
+        return "torchrl" if self.config.startswith("torchrl/") else "sb3"
+
+    @property
+    def path(self) -> Path:
+        return CONFIGS / self.config
+
+
+#: The rows, in the order of the table.
+ROWS: dict[str, Row] = {
+    row.name: row
+    for row in (
+        Row("paper_speed", 15.0, "torchrl/paper_speed_mappo.yaml"),
+        Row("paper_guidance", 30.0, "paper_guidance_ppo.yaml"),
+        Row("paper_force", 60.0, "paper_force_ppo.yaml"),
+        Row("acoustic_speed", 30.0, "acoustic_speed_ppo.yaml"),
+        Row("acoustic_guidance", 30.0, "acoustic_guidance_ppo.yaml"),
+        Row("survey_speed", 30.0, "survey_speed_ppo.yaml"),
+    )
+}
+
+
+def _train_command(row: Row, seed: int, minutes: float, folder: Path) -> list[str]:
+    here = sys.executable
+    if row.pipeline == "torchrl":
+        return [here, "-m", "training.torchrl_ppo", "--config", str(row.path), "--set", f"minutes={minutes}",
+                "--set", "total_frames=1e12", "--set", "eval_episodes=1", "--seed", str(seed), "--out", str(folder),
+                "--overwrite", "--no-progress"]  # fmt: skip
+    return [here, "-m", "benchmarks.learning", "--config", str(row.path), "--minutes", str(minutes),
+            "--seed", str(seed), "--episodes", "1", "--out", str(folder), "--quiet"]  # fmt: skip
+
+
+def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
+    from training.learned import load_learned_policy
+
+    _, config = load_learned_policy(folder)
+    return config["scenario"], dict(config["env_kwargs"])
+
+
+def evaluate_folder(folder: Path, episodes: int) -> dict[str, Any]:
+    """The run's policy, the reference (and the extrapolating reference over a lossy channel) on the same seeds."""
+    from baselines.engine import episode_reports
+    from baselines.reference import ReferencePolicy
+    from marine_formation_env.env import parallel_env
+    from training.learned import load_learned_policy
+
+    policy, config = load_learned_policy(folder)
+    env = parallel_env(config["scenario"], **config["env_kwargs"])
+    seeds = [EVAL_SEED + k for k in range(episodes)]
+    policies: dict[str, Any] = {"learned": policy, "reference": ReferencePolicy(env)}
+    if not env.config.ideal_observations:
+        policies["reference_extrapolate"] = ReferencePolicy(env, extrapolate=True)
+    out: dict[str, Any] = {"seeds": seeds}
+    for name, member in policies.items():
+        metrics, _ = episode_reports(member, env.config, seeds)
+        out[name] = {
+            "return": float(np.mean([m["return"] for m in metrics])),
+            "returns": [m["return"] for m in metrics],
+            "success": float(np.mean([m["success"] for m in metrics])),
+            "action_change": float(np.mean([m["action_change"] for m in metrics])),
+            "final_spread": float(np.mean([m["final_coordination_spread"] for m in metrics])),
+        }
+    return out
+
+
+def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, fresh: bool) -> dict[str, Any]:
+    """Train (unless done before) and evaluate one row with one seed; its record (also ``result.json``)."""
+    folder = out / row.name / f"seed_{seed}"
+    result = folder / "result.json"
+    if result.is_file() and not fresh:
+        record: dict[str, Any] = json.loads(result.read_text())
+        if record.get("minutes") == minutes and record.get("episodes") == episodes:
+            return record
+    folder.mkdir(parents=True, exist_ok=True)
+    begin = time.perf_counter()
+    done = subprocess.run(_train_command(row, seed, minutes, folder), cwd=ROOT, capture_output=True, text=True)
+    atomic_write_text(folder / "train.log", done.stdout + "\n--- stderr ---\n" + done.stderr)
+    if done.returncode != 0:
+        return {"row": row.name, "seed": seed, "failed": f"exit {done.returncode}; see {folder / 'train.log'}"}
+    record = {
+        "row": row.name,
+        "seed": seed,
+        "pipeline": row.pipeline,
+        "config": row.config,
+        "minutes": minutes,
+        "episodes": episodes,
+        "wall_seconds": round(time.perf_counter() - begin, 1),
+        **evaluate_folder(folder, episodes),
+    }
+    atomic_write_text(result, json.dumps(record, indent=2) + "\n")
+    return record
+
+
+def _stats(values: list[float]) -> dict[str, Any]:
+    """Mean, sample standard deviation (0 for one value), min, max and the values."""
+    array = np.asarray(values, dtype=float)
+    std = float(array.std(ddof=1)) if len(array) > 1 else 0.0
+    return {"mean": float(array.mean()), "std": std, "min": float(array.min()), "max": float(array.max()),
+            "per_seed": [float(v) for v in array]}  # fmt: skip
+
+
+def row_summary(row: Row, records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Over the row's finished seeds: each measure's statistics and whether the targets hold (module docstring)."""
+    ok = [r for r in records if "learned" in r]
+    summary: dict[str, Any] = {"row": row.name, "pipeline": row.pipeline, "seeds": [r["seed"] for r in ok]}
+    failed = {str(r["seed"]): r["failed"] for r in records if "failed" in r}
+    if failed:
+        summary["failed"] = failed
+    if not ok:
+        return summary
+    members = [m for m in ("learned", "reference", "reference_extrapolate") if m in ok[0]]
+    for member in members:
+        summary[member] = {key: _stats([r[member][key] for r in ok]) for key in ("return", "success", "action_change")}
+    performance = _stats([r["reference"]["return"] / r["learned"]["return"] for r in ok])
+    smoothness = _stats([r["learned"]["action_change"] / max(r["reference"]["action_change"], 1e-12) for r in ok])
+    summary["performance"], summary["smoothness_ratio"] = performance, smoothness
+    success = summary["learned"]["success"]["mean"]
+    if "reference_extrapolate" in summary:
+        beaten = summary["learned"]["return"]["mean"] >= summary["reference_extrapolate"]["return"]["mean"]
+        summary["target_met"] = bool(success >= CHANNEL_SUCCESS_TARGET and beaten)
+    else:
+        summary["target_met"] = bool(performance["mean"] >= PERFORMANCE_TARGET and success >= SUCCESS_TARGET)
+    if row.name.endswith("_speed"):
+        summary["smoothness_met"] = bool(smoothness["mean"] <= SMOOTHNESS_TARGET)
+    return summary
+
+
+def _pm(stats: dict[str, Any] | None, fmt: str) -> str:
+    if stats is None:
+        return "–"
+    return fmt.format(stats["mean"]) + (f" ± {fmt.format(stats['std'])}" if len(stats["per_seed"]) > 1 else "")
+
+
+def format_table(summaries: list[dict[str, Any]], budgets: dict[str, float]) -> str:
+    """The markdown table of the rows."""
+    lines = [
+        "| row | pipeline | minutes | seeds | learned return | reference return | performance | success learned "
+        "/ reference | Δa learned / reference | extrapolating reference return, success | target |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in summaries:
+        if "learned" not in s:
+            lines.append(f"| `{s['row']}` | {s['pipeline']} | {budgets[s['row']]:g} | – | failed: {s.get('failed')} "
+                         "| | | | | | |")  # fmt: skip
+            continue
+        learned, reference = s["learned"], s["reference"]
+        extra = s.get("reference_extrapolate")
+        channel = f"{_pm(extra['return'], '{:.1f}')}, {_pm(extra['success'], '{:.0%}')}" if extra else "–"
+        target = "met" if s["target_met"] else "not met"
+        if "smoothness_met" in s:
+            target += ", smooth" if s["smoothness_met"] else ", not smooth"
+        lines.append(
+            f"| `{s['row']}` | {s['pipeline']} | {budgets[s['row']]:g} | {len(s['seeds'])} "
+            f"| {_pm(learned['return'], '{:.1f}')} | {_pm(reference['return'], '{:.1f}')} "
+            f"| {_pm(s['performance'], '{:.2f}')} "
+            f"| {_pm(learned['success'], '{:.0%}')} / {_pm(reference['success'], '{:.0%}')} "
+            f"| {_pm(learned['action_change'], '{:.3g}')} / {_pm(reference['action_change'], '{:.3g}')} "
+            f"| {channel} | {target} |"
+        )
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- figures
+
+
+def _curve(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(minutes, training episode return) of a run folder's ``progress.csv`` (rows without episodes dropped)."""
+    import csv
+
+    path = folder / "progress.csv"
+    if not path.is_file():
+        return np.zeros(0), np.zeros(0)
+    with path.open(newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if r.get("episode_return") not in (None, "")]
+    return (np.array([float(r["seconds"]) / 60.0 for r in rows]), np.array([float(r["episode_return"]) for r in rows]))
+
+
+def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Path, path: Path) -> None:
+    """Per row: the mean and the min–max over seeds of the training episodes' return, the reference as a line."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    cols = min(3, len(rows))
+    nrows = -(-len(rows) // cols)
+    fig = Figure(figsize=(5.0 * cols, 3.6 * nrows), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
+    for ax, row in zip(axes, rows, strict=False):
+        mine = [r for r in records if r.get("row") == row.name and "learned" in r]
+        curves = [_curve(out / row.name / f"seed_{r['seed']}") for r in mine]
+        curves = [(t, y) for t, y in curves if len(t) > 1]
+        if curves:
+            end = min(t[-1] for t, _ in curves)
+            grid = np.linspace(0.0, end, 100)
+            grid = grid[grid >= max(t[0] for t, _ in curves)]
+            ys = np.array([np.interp(grid, t, y) for t, y in curves])
+            ax.fill_between(grid, ys.min(axis=0), ys.max(axis=0), alpha=0.25, color="C0", lw=0)
+            ax.plot(grid, ys.mean(axis=0), color="C0", label=f"learned, mean of {len(curves)} seeds (min–max)")
+        if mine:
+            ax.axhline(np.mean([r["reference"]["return"] for r in mine]), color="k", ls="--", label="reference")
+            if "reference_extrapolate" in mine[0]:
+                value = np.mean([r["reference_extrapolate"]["return"] for r in mine])
+                ax.axhline(value, color="C2", ls=":", label="extrapolating reference")
+        ax.set_title(row.name)
+        ax.set_xlabel("wall-clock minutes")
+        ax.set_ylabel("episode return")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    for ax in axes[len(rows) :]:
+        ax.set_visible(False)
+    fig.suptitle("Training episodes' return (stochastic policy) against the reference's evaluation return")
+    fig.tight_layout()
+    _save_figure(fig, path)
+
+
+def plot_episode(row: Row, record: dict[str, Any], out: Path, path: Path) -> None:
+    """One evaluation episode (the first seed) of the row's learned policy beside the reference."""
+    from baselines.engine import episode_reports
+    from baselines.plots import plot_comparison
+    from baselines.reference import ReferencePolicy
+    from marine_formation_env.env import parallel_env
+    from training.learned import load_learned_policy
+
+    folder = out / row.name / f"seed_{record['seed']}"
+    policy, config = load_learned_policy(folder)
+    env = parallel_env(config["scenario"], **config["env_kwargs"])
+    seeds = record["seeds"][:1]
+    _, learned = episode_reports(policy, env.config, seeds)
+    _, reference = episode_reports(ReferencePolicy(env), env.config, seeds)
+    title = f"{row.name}: learned (training seed {record['seed']}) and reference, evaluation seed {seeds[0]}"
+    plot_comparison({"learned": learned[0], "reference": reference[0]}, env.config, path, title=title)
+
+
+def _save_figure(fig: Any, path: Path) -> None:
+    from marine_formation_env.atomic import atomic_path
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=path.suffix.lstrip("."))
+
+
+# ----------------------------------------------------------------------------- publishing
+
+
+def _machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def _commit() -> str:
+    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return done.stdout.strip() or "unknown"
+
+
+def publish_markdown(table: str, command: str, document: Path) -> None:
+    """Replace the text between the ``learned-baselines`` markers of ``document`` (append them if missing)."""
+    text = document.read_text() if document.is_file() else ""
+    block = (
+        f"{MARKERS[0]}\n"
+        f"Measured on commit {_commit()}, {_machine()}, with `{command}`.\n\n{table}\n"
+        f"\n![Learning curves](learning_curves.png)\n{MARKERS[1]}"
+    )
+    if MARKERS[0] in text and MARKERS[1] in text:
+        head, rest = text.split(MARKERS[0], 1)
+        _, tail = rest.split(MARKERS[1], 1)
+        text = head + block + tail
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    atomic_write_text(document, text)
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def _parse_rows(text: str) -> list[Row]:
+    names = [item.strip() for item in text.split(",") if item.strip()]
+    unknown = [name for name in names if name not in ROWS]
+    if unknown or not names:
+        raise ValueError(f"--rows: unknown row(s) {unknown or [text]}; rows: {list(ROWS)}")
+    return [ROWS[name] for name in dict.fromkeys(names)]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    prog = "python -m benchmarks.learned_baselines"
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rows", default=",".join(ROWS), help=f"comma-separated rows (default all: {','.join(ROWS)})")
+    parser.add_argument("--seeds", default="0,1,2", help="training seeds (default 0,1,2)")
+    parser.add_argument(
+        "--minutes", type=float, default=None, help="every row's budget (a smoke run); default: its own"
+    )
+    parser.add_argument("--episodes", type=int_at_least(1), default=10, help="evaluation episodes (default 10)")
+    parser.add_argument("--out", type=Path, default=Path("runs/learned_baselines"))
+    parser.add_argument("--fresh", action="store_true", help="retrain runs that have a result already")
+    parser.add_argument("--publish", action="store_true", help="write docs/results.md, the figures and the policies")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        rows = _parse_rows(args.rows)
+        seeds = parse_seeds(args.seeds)
+    except ValueError as err:
+        parser.error(str(err))
+    if args.minutes is not None and not args.minutes > 0:
+        parser.error(f"--minutes must be > 0, got {args.minutes}")
+    if args.publish and args.minutes is not None:
+        parser.error("--publish writes the shipped results: run it with every row's own budget (no --minutes)")
+    budgets = {row.name: args.minutes if args.minutes is not None else row.minutes for row in rows}
+    records: list[dict[str, Any]] = []
+    report: dict[str, Any] = {"command": " ".join([prog, *(argv if argv is not None else sys.argv[1:])])}
+    for seed in seeds:  # seed-major: a change in the machine's load falls on every row alike
+        for row in rows:
+            if not args.quiet:
+                print(f"[{time.strftime('%H:%M:%S')}] {row.name}, seed {seed}, {budgets[row.name]:g} min", flush=True)
+            records.append(run_row_seed(row, seed, budgets[row.name], args.episodes, args.out, args.fresh))
+            report.update(
+                runs=records,
+                rows=[row_summary(r, [x for x in records if x.get("row") == r.name]) for r in rows],
+                complete=False,
+            )
+            atomic_write_text(args.out / "learned_baselines.json", json.dumps(report, indent=2) + "\n")
+    report["complete"] = True
+    atomic_write_text(args.out / "learned_baselines.json", json.dumps(report, indent=2) + "\n")
+    table = format_table(report["rows"], budgets)
+    print(table)
+    plot_learning_curves(rows, records, args.out, args.out / "learning_curves.png")
+    for row in rows:
+        first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
+        if first is not None:
+            plot_episode(row, first, args.out, args.out / "episodes" / f"{row.name}.png")
+    if args.publish:
+        from baselines.pretrained import export_run
+
+        docs = ROOT / "docs"
+        publish_markdown(table, report["command"], docs / "results.md")
+        plot_learning_curves(rows, records, args.out, docs / "learning_curves.png")
+        for row in rows:
+            first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
+            if first is None:
+                continue
+            plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
+            training = {"minutes": first["minutes"], "config": row.config, "commit": _commit()}
+            export_run(args.out / row.name / f"seed_{first['seed']}", row.name, row.note or row.name,
+                       training=training, evaluation=_header_evaluation(first))  # fmt: skip
+    return 0
+
+
+def _header_evaluation(record: dict[str, Any]) -> dict[str, Any]:
+    """What a pretrained policy's header says it measured (``baselines.pretrained``)."""
+    out = {
+        "seeds": record["seeds"],
+        "learned_return": record["learned"]["return"],
+        "learned_returns": record["learned"]["returns"],
+        "learned_success": record["learned"]["success"],
+        "reference_return": record["reference"]["return"],
+        "reference_success": record["reference"]["success"],
+        "learned_action_change": record["learned"]["action_change"],
+        "reference_action_change": record["reference"]["action_change"],
+    }
+    if "reference_extrapolate" in record:
+        out["reference_extrapolate_return"] = record["reference_extrapolate"]["return"]
+    return out
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,126 @@
+"""``python -m benchmarks.learned_baselines``: the table of learned baselines over training seeds.
+
+Truth: hand-computed statistics of made-up runs (mean, sample standard
+deviation, the targets' rules of the learning issue), the markdown document
+around the markers left as it was, and a run that already has its result not
+trained again. A real smoke run (training and evaluation) is marked slow.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import benchmarks.learned_baselines as lb
+
+
+def _record(seed: int, learned: float, reference: float, success: float, change: float, extra=None) -> dict:
+    record = {
+        "row": "paper_speed",
+        "seed": seed,
+        "seeds": [10_000, 10_001],
+        "learned": {"return": learned, "returns": [learned] * 2, "success": success, "action_change": change},
+        "reference": {"return": reference, "returns": [reference] * 2, "success": 1.0, "action_change": 0.01},
+    }
+    if extra is not None:
+        record["reference_extrapolate"] = {"return": extra, "returns": [extra] * 2, "success": 1.0,
+                                           "action_change": 0.01}  # fmt: skip
+    return record
+
+
+def test_a_row_s_summary_is_the_mean_and_sample_std_over_seeds_and_applies_the_targets():
+    records = [_record(0, -100.0, -90.0, 1.0, 0.02), _record(1, -90.0, -90.0, 0.8, 0.04), {"row": "paper_speed",
+               "seed": 2, "failed": "exit 1"}]  # fmt: skip
+    s = lb.row_summary(lb.ROWS["paper_speed"], records)
+    assert s["seeds"] == [0, 1] and s["failed"] == {"2": "exit 1"}
+    assert s["learned"]["return"]["mean"] == -95.0
+    assert s["learned"]["return"]["std"] == pytest.approx(np.sqrt(50.0))  # ddof 1: ((5² + 5²) / 1)^½
+    assert s["performance"]["per_seed"] == pytest.approx([0.9, 1.0])
+    assert s["performance"]["mean"] == pytest.approx(0.95)
+    assert s["learned"]["success"]["mean"] == pytest.approx(0.9)
+    assert s["smoothness_ratio"]["mean"] == pytest.approx(3.0)  # (2 + 4) / 2 times the reference's 0.01
+    assert s["target_met"] and s["smoothness_met"]  # 0.95 ≥ 0.9, 90 % ≥ 80 %, 3.0 ≤ 3
+    worse = lb.row_summary(lb.ROWS["paper_speed"], [_record(0, -100.0, -89.0, 1.0, 0.05)])
+    assert not worse["target_met"] and not worse["smoothness_met"]  # 0.89 < 0.9, 5× the reference's Δa
+
+
+def test_a_lossy_channel_row_is_measured_against_the_extrapolating_reference():
+    row = lb.ROWS["acoustic_speed"]
+    beats = lb.row_summary(row, [{**_record(0, -120.0, -400.0, 0.9, 0.01, extra=-125.0), "row": row.name}])
+    assert beats["target_met"]  # 90 % success and a return above the extrapolating reference's
+    short = lb.row_summary(row, [{**_record(0, -120.0, -400.0, 0.8, 0.01, extra=-125.0), "row": row.name}])
+    below = lb.row_summary(row, [{**_record(0, -130.0, -400.0, 1.0, 0.01, extra=-125.0), "row": row.name}])
+    assert not short["target_met"] and not below["target_met"]
+    table = lb.format_table([beats], {row.name: 30.0})
+    assert "| `acoustic_speed` | sb3 | 30 | 1 | -120.0 | -400.0 | 3.33 | 90% / 100% |" in table
+    assert "-125.0, 100%" in table and table.endswith("| met, smooth |")
+
+
+def test_publishing_replaces_only_the_text_between_the_markers(tmp_path):
+    document = tmp_path / "results.md"
+    document.write_text(f"# Results\n\nbefore\n\n{lb.MARKERS[0]}\nold table\n{lb.MARKERS[1]}\n\nafter\n")
+    lb.publish_markdown("| new | table |", "python -m benchmarks.learned_baselines --publish", document)
+    text = document.read_text()
+    assert text.startswith("# Results\n\nbefore\n\n") and text.endswith("\n\nafter\n")
+    assert "old table" not in text and "| new | table |" in text and "Measured on commit" in text
+    fresh = tmp_path / "empty.md"
+    fresh.write_text("# Results\n")
+    lb.publish_markdown("| t |", "cmd", fresh)
+    assert fresh.read_text().count(lb.MARKERS[0]) == 1
+
+
+def test_a_run_with_a_result_is_not_trained_again(tmp_path, monkeypatch):
+    folder = tmp_path / "paper_speed" / "seed_4"
+    folder.mkdir(parents=True)
+    stored = {**_record(4, -80.0, -90.0, 1.0, 0.01), "minutes": 15.0, "episodes": 10}
+    (folder / "result.json").write_text(json.dumps(stored))
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("trained again")
+
+    monkeypatch.setattr(lb.subprocess, "run", no_training)
+    assert lb.run_row_seed(lb.ROWS["paper_speed"], 4, 15.0, 10, tmp_path, fresh=False) == stored
+    with pytest.raises(AssertionError, match="trained again"):  # another budget is another run
+        lb.run_row_seed(lb.ROWS["paper_speed"], 4, 1.0, 10, tmp_path, fresh=False)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--rows", "paper_speed,fish"], "--rows: unknown row(s) ['fish']"),
+        (["--seeds", "0,x"], "expected comma-separated whole numbers ≥ 0, got 'x'"),
+        (["--minutes", "0"], "--minutes must be > 0, got 0.0"),
+        (["--minutes", "1", "--publish"], "--publish writes the shipped results"),
+    ],
+)
+def test_bad_arguments_are_refused_in_one_line(argv, message, capsys, tmp_path):
+    with pytest.raises(SystemExit) as stop:
+        lb.main([*argv, "--out", str(tmp_path / "out")])
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_every_row_s_config_exists_and_names_its_scenario():
+    from training.config import load_config
+
+    for row in lb.ROWS.values():
+        config = load_config(row.path)
+        scenario, level = row.name.rsplit("_", 1)
+        assert config["scenario"] == scenario and config["env_kwargs"]["action_level"] == level, row.name
+
+
+@pytest.mark.slow
+def test_a_smoke_run_trains_evaluates_and_plots(tmp_path):
+    out = tmp_path / "out"
+    argv = ["--rows", "paper_speed,paper_guidance", "--seeds", "0", "--minutes", "0.1", "--episodes", "1",
+            "--out", str(out), "--quiet"]  # fmt: skip
+    assert lb.main(argv) == 0
+    report = json.loads((out / "learned_baselines.json").read_text())
+    assert report["complete"] and [r["row"] for r in report["rows"]] == ["paper_speed", "paper_guidance"]
+    for row in report["rows"]:
+        assert row["seeds"] == [0] and row["learned"]["return"]["mean"] < 0.0
+    assert (out / "learning_curves.png").stat().st_size > 0
+    assert (out / "episodes" / "paper_guidance.png").stat().st_size > 0
