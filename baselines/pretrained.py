@@ -310,7 +310,8 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     params = mlp.params
     weights = [params[k, "weight"].detach().double().numpy().T.copy() for k in indices]
     biases = [params[k, "bias"].detach().double().numpy().copy() for k in indices]
-    return MLPPolicy(weights, biases, mean, std, clip, "tanh", policy.action_dim), config
+    squash = "tanh" if policy.distribution == "tanh_normal" else "clip"
+    return MLPPolicy(weights, biases, mean, std, clip, squash, policy.action_dim), config
 
 
 def export_run(

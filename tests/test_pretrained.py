@@ -170,7 +170,8 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
     np.testing.assert_allclose(exported.act_batch(obs), original.act_batch(obs), atol=2e-5)
 
 
-def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path):
+@pytest.mark.parametrize("distribution", ["tanh_normal", "normal"])
+def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path, distribution):
     pytest.importorskip("torchrl")
     from training.torchrl_ppo import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main
@@ -179,12 +180,15 @@ def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path
     argv = ["--out", str(run), "--no-progress"]
     for item in ["num_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "epochs=1",
                  "eval_episodes=1", "hidden=[16, 16]", "env_kwargs.horizon=4.0", "env_kwargs.action_level=speed",
-                 "normalize_observations=true"]:  # fmt: skip
+                 "normalize_observations=true", f"distribution={distribution}"]:  # fmt: skip
         argv += ["--set", item]
     assert torchrl_main(argv) == 0
     export_run(run, "torchrl_tiny", "smoke", tmp_path / "shipped")
     exported, info = load_pretrained("torchrl_tiny", tmp_path / "shipped")
     assert info.training["pipeline"] == "torchrl" and info.evaluation["learned_return"] < 0.0
+    assert str(np.load(tmp_path / "shipped" / "torchrl_tiny.npz")["squash"]) == (
+        "clip" if distribution == "normal" else "tanh"
+    )
     original, _ = load_torch_policy(run)
     obs = np.stack([o for o, _ in (_observations(s) for s in range(4))]).reshape(-1, info.observation_dim)
     np.testing.assert_allclose(exported.act_batch(obs), original.act_batch(obs), atol=2e-5)

@@ -40,8 +40,12 @@ TINY = [
 ]
 
 
-@pytest.mark.parametrize("algo", ["mappo", "ippo"])
-def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_deterministic_actor(tmp_path, algo):
+@pytest.mark.parametrize(
+    ("algo", "distribution"), [("mappo", "tanh_normal"), ("ippo", "tanh_normal"), ("mappo", "normal")]
+)
+def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_deterministic_actor(
+    tmp_path, algo, distribution
+):
     out = tmp_path / algo
     args = [
         "--seed",
@@ -51,6 +55,8 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         "--no-progress",
         "--set",
         f"algo={algo}",
+        "--set",
+        f"distribution={distribution}",
         "--set",
         "env_kwargs.action_level=speed",
     ]
@@ -72,6 +78,8 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     td = TensorDict({("vessel", "observation"): torch.from_numpy(obs.reshape(18, 1, -1))}, batch_size=[18])
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         theirs = policy.actor(td)["vessel", "action"].numpy().reshape(6, 3, 1)
+    if distribution == "normal":  # TorchRL's mode is the Gaussian's mean; the env clips it, and so does the policy
+        theirs = np.clip(theirs, -1.0, 1.0)
     np.testing.assert_allclose(mine, theirs, rtol=1e-5, atol=1e-6)  # float32 tanh of the same loc
 
 
@@ -127,6 +135,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
+        ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
     ],

@@ -26,6 +26,7 @@ nest; unknown keys and bad values are refused by name):
 | ``total_frames`` | formation-steps of the run | 1.0e6 |
 | ``minutes`` | wall-clock limit of the run (stops after the iteration that passes it), or null | null |
 | ``hidden`` | hidden layer sizes of the policy and the critic | ``[64, 64]`` |
+| ``distribution`` | ``tanh_normal`` (TorchRL's recipe) or ``normal`` (SB3's; the env clips) | ``tanh_normal`` |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
 | ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
 | ``target_kl`` | stop an iteration's epochs once a minibatch's approximate KL exceeds 1.5 × this, or null | null |
@@ -35,6 +36,14 @@ nest; unknown keys and bad values are refused by name):
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
+
+``distribution: tanh_normal`` squashes a Gaussian with tanh, as TorchRL's
+multi-agent PPO recipe does; its log-probability of an action rounded to
+±1 in float32 is far from the one it was sampled with, which showed as an
+approximate KL of 1–5 per iteration even with the learning rate at 0.
+``normal`` is SB3's choice: an unbounded Gaussian whose samples the env
+clips to [−1, 1] (the env clips every action), with exact log-probabilities;
+the deterministic action is then the mean clipped to [−1, 1].
 
 The three normalizations are SB3's (``VecNormalize`` and PPO's advantage
 standardization), done on the learner's side: ``normalize_observations``
@@ -121,6 +130,7 @@ DEFAULTS: dict[str, Any] = {
     "total_frames": 1_000_000,
     "minutes": None,
     "hidden": [64, 64],
+    "distribution": "tanh_normal",
     "lr": 3e-4,
     "lr_schedule": "constant",
     "target_kl": None,
@@ -140,6 +150,7 @@ DEFAULTS: dict[str, Any] = {
 
 ALGOS = ("mappo", "ippo")
 LR_SCHEDULES = ("constant", "linear")
+DISTRIBUTIONS = ("tanh_normal", "normal")
 POLICY_FILE = "policy.pt"
 
 
@@ -165,6 +176,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
+    if cfg["distribution"] not in DISTRIBUTIONS:
+        raise TrainConfigError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {cfg['distribution']!r}")
     if cfg["lr_schedule"] not in LR_SCHEDULES:
         raise TrainConfigError(f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {cfg['lr_schedule']!r}")
     if cfg["target_kl"] is not None:
@@ -300,12 +313,19 @@ class EpisodeReturns:
             return ended
 
 
-def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[int], normalize: bool = False) -> Any:
-    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → TanhNormal."""
+def _policy_network(
+    obs_dim: int,
+    action_dim: int,
+    n_agents: int,
+    hidden: list[int],
+    normalize: bool = False,
+    distribution: str = "tanh_normal",
+) -> Any:
+    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution."""
     import torch
     from tensordict.nn import NormalParamExtractor, TensorDictModule
     from torch import nn
-    from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
+    from torchrl.modules import IndependentNormal, MultiAgentMLP, ProbabilisticActor, TanhNormal
 
     net = nn.Sequential(
         *([running_norm(obs_dim)] if normalize else []),
@@ -323,13 +343,19 @@ def _policy_network(obs_dim: int, action_dim: int, n_agents: int, hidden: list[i
     module = TensorDictModule(
         net, in_keys=[("vessel", "observation")], out_keys=[("vessel", "loc"), ("vessel", "scale")]
     )
+    if distribution == "normal":  # SB3's: unbounded samples, the env clips them
+        kind: dict[str, Any] = {"distribution_class": IndependentNormal}
+    else:
+        kind = {
+            "distribution_class": TanhNormal,
+            "distribution_kwargs": {"low": torch.tensor(-1.0), "high": torch.tensor(1.0)},
+        }
     return ProbabilisticActor(
         module,
         in_keys=[("vessel", "loc"), ("vessel", "scale")],
         out_keys=[("vessel", "action")],
-        distribution_class=TanhNormal,
-        distribution_kwargs={"low": torch.tensor(-1.0), "high": torch.tensor(1.0)},
         return_log_prob=True,
+        **kind,
     )
 
 
@@ -364,11 +390,12 @@ class TorchPolicy:
         observation_dim, action_dim: the sizes it was trained with.
     """
 
-    def __init__(self, actor: Any, observation_dim: int, action_dim: int) -> None:
+    def __init__(self, actor: Any, observation_dim: int, action_dim: int, distribution: str = "tanh_normal") -> None:
         self.actor = actor
         self.trunk = _shared_trunk(actor)
         self.observation_dim = observation_dim
         self.action_dim = action_dim
+        self.distribution = distribution
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         import torch
@@ -377,7 +404,8 @@ class TorchPolicy:
         flat = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, 1, obs.shape[-1]))
         with torch.no_grad():
             loc, _ = self.trunk(flat).chunk(2, dim=-1)
-        return np.asarray(torch.tanh(loc).numpy(), dtype=np.float32).reshape(*obs.shape[:-1], self.action_dim)
+        action = torch.tanh(loc) if self.distribution == "tanh_normal" else loc.clamp(-1.0, 1.0)
+        return np.asarray(action.numpy(), dtype=np.float32).reshape(*obs.shape[:-1], self.action_dim)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """The PettingZoo-dict form of :meth:`act_batch`."""
@@ -404,12 +432,13 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         # the shared MLP takes any number of agents: build it for one, each vessel is a batch entry
         hidden = [int(h) for h in saved["hidden"]]
         normalize = bool(saved.get("normalize_observations", False))
-        actor = _policy_network(int(dims["observation"]), int(dims["action"]), 1, hidden, normalize)
+        distribution = str(saved.get("distribution", "tanh_normal"))
+        actor = _policy_network(int(dims["observation"]), int(dims["action"]), 1, hidden, normalize, distribution)
         actor.load_state_dict(saved["actor"])
         config = json.loads(saved["config"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
-    return TorchPolicy(actor, int(dims["observation"]), int(dims["action"])), config
+    return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution), config
 
 
 def _shared_trunk(actor: Any) -> Any:
@@ -450,7 +479,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize)
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"])
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
@@ -613,6 +642,7 @@ def _save(
             "dims": {"observation": obs_dim, "action": action_dim},
             "hidden": cfg["hidden"],
             "normalize_observations": cfg["normalize_observations"],
+            "distribution": cfg["distribution"],
             "config": json.dumps(cfg),
         },
         buffer,
