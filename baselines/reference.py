@@ -99,7 +99,7 @@ class ReferencePolicy(BatchPolicy):
                     "and the policy only commands the speed (set the scenario's los_integral_gain instead)"
                 )
         self.config = config
-        self.layout = ObservationLayout(config.n_vessels)
+        self.layout = ObservationLayout(config.n_vessels, config.observation_slots)
         self.extrapolate = extrapolate
         self.integral_los = None if integral_los is None else float(integral_los)
         self._e_int: np.ndarray | None = None

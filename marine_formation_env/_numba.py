@@ -927,7 +927,12 @@ class StepKernel:
         """
         b, n, dim = self.dims
         cfg = self.config
-        obs = np.empty((b, n, dim), dtype=np.float32)
+        # the kernel writes the own part and the n − 1 vessels' slots; padding slots (observation_slots) stay 0
+        obs = (
+            np.empty((b, n, dim), dtype=np.float32)
+            if dim == OWN_SIZE + SLOT_SIZE * (n - 1)
+            else np.zeros((b, n, dim), dtype=np.float32)
+        )
         comps = np.empty((6, b, n))
         flags = np.empty((b, 2), dtype=np.bool_)
         reward = np.empty((b, n))

@@ -200,7 +200,7 @@ class FormationCore:
         self.config = config
         self.num_envs = int(num_envs)
         self.n = config.n_vessels
-        self.layout = ObservationLayout(self.n)
+        self.layout = ObservationLayout(self.n, config.observation_slots)
         self.action_dim = config.action_dim
         n = self.n
         self._dx = np.ascontiguousarray(config.formation[:, 0])
@@ -621,7 +621,8 @@ class FormationCore:
         out[..., 5] = cfg.u_d.value(time)[:, None]
         out[..., 6] = cfg.u_d.rate(time)[:, None]
         out[..., LANE_OFFSET] = self._dy
-        slots = out[..., self.layout.own :].reshape(b, n, n - 1, self.layout.slot)
+        # the n − 1 vessels' slots (padding slots beyond them stay 0: not linked)
+        slots = out[..., self.layout.own :].reshape(b, n, self.layout.slots, self.layout.slot)[:, :, : n - 1]
         if coords is not None:
             theta, x_dot = coords.ell - self._dx, coords.ell_dot
         if self.channel is None:

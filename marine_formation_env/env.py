@@ -112,6 +112,13 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     K = max(0.01, 1/smallest radius of the path); D = max(1 m, max |D_y|). On a
     curved path Y is the ``corridor``.
 
+    Teams of several sizes, one observation length: ``observation_slots=M``
+    (M ≥ n − 1) appends M − (n − 1) empty slots, every entry 0 (so the link
+    bit says "nothing heard", as for a vessel outside ``A_j``), and the space
+    is ``(10 + 4·M,)``. A policy over slots (attention, a graph network) then
+    trains on several team sizes in one batch and runs on a larger team
+    without padding; the default, M = n − 1, is the layout above.
+
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
     ``(x_i, ẋ_i)`` (docs/model.md §3), given relative to ``j``. ``state()`` returns the
     global state ``(n·6 + 1,)``: every vessel's ``x, y, ψ (wrapped), u, v, r``
@@ -251,6 +258,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `los_integral_gain`| 0 (plain LOS)        | σ [m/s]: integral LOS in the `speed` level's path follower |
     | `path`             | `"straight"`         | `Path`, kind name or mapping with `kind` ("Paths")         |
     | `corridor`         | derived (curved)     | largest abs(e_j) [m] on a curved path before termination |
+    | `observation_slots`| n − 1                | slots per observation; more pad with empty ones           |
 
     A mapping given for a nested setting updates the scenario's value field
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the

@@ -34,14 +34,21 @@ class ObservationLayout:
     """
 
     n_vessels: int
+    #: slots per observation; None: n − 1 (``observation_slots``); the slots beyond n − 1 stay empty (all 0)
+    n_slots: int | None = None
 
     own: int = len(OWN_FEATURES)
     slot: int = len(SLOT_FEATURES)
 
     @property
+    def slots(self) -> int:
+        """Number of slots in one observation (n − 1 unless padded)."""
+        return self.n_vessels - 1 if self.n_slots is None else self.n_slots
+
+    @property
     def dim(self) -> int:
         """Length of one agent's observation."""
-        return self.own + self.slot * (self.n_vessels - 1)
+        return self.own + self.slot * self.slots
 
     def slot_vessels(self, j: int) -> list[int]:
         """The vessel held in each slot of vessel ``j``'s observation."""
@@ -49,10 +56,13 @@ class ObservationLayout:
         return [(j + k + 1) % n for k in range(n - 1)]
 
     def split(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Split ``(..., dim)`` observations into own ``(..., 10)`` and slots ``(..., N−1, 4)``."""
+        """Split ``(..., dim)`` observations into own ``(..., 10)`` and the N − 1 vessels' slots ``(..., N−1, 4)``.
+
+        Padding slots (``observation_slots`` > N − 1) are left out.
+        """
         own = obs[..., : self.own]
-        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.n_vessels - 1, self.slot)
-        return own, slots
+        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.slots, self.slot)
+        return own, slots[..., : self.n_vessels - 1, :]
 
 
 def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -85,8 +95,8 @@ def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
     dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
     slot_low = [0.0, -dtheta, -dxdot, 0.0]
     slot_high = [1.0, dtheta, dxdot, cfg.horizon]
-    low = np.array(own_low + slot_low * (cfg.n_vessels - 1), dtype=np.float32)
-    high = np.array(own_high + slot_high * (cfg.n_vessels - 1), dtype=np.float32)
+    low = np.array(own_low + slot_low * cfg.observation_slots, dtype=np.float32)
+    high = np.array(own_high + slot_high * cfg.observation_slots, dtype=np.float32)
     return low, high
 
 

@@ -146,6 +146,7 @@ class ScenarioConfig:
         path: the reference path (:mod:`marine_formation_env.paths`).
         corridor: on a curved path, the largest |e| [m] before a vessel is
             out of bounds (``inf`` on the straight path).
+        observation_slots: slots per observation (≥ n − 1; beyond n − 1 empty).
     """
 
     name: str
@@ -181,6 +182,7 @@ class ScenarioConfig:
     los_integral_gain: float
     path: Path
     corridor: float
+    observation_slots: int
 
     # --------------------------------------------------------------- derived
     @functools.cached_property
@@ -311,6 +313,7 @@ def resolve(settings: Settings) -> ScenarioConfig:
         los_integral_gain=float(s.los_integral_gain),
         path=path,
         corridor=corridor,
+        observation_slots=_resolve_slots(s.observation_slots, n),
     )
     problem = initial_state_problem(config, config.start_state, noise.as_array())
     if problem is not None:
@@ -336,6 +339,18 @@ def _resolve_identity(s: Settings) -> tuple[int, int]:
         raise ConfigError(str(err)) from None
     assert seed is not None
     return int(n), seed
+
+
+def _resolve_slots(slots: Any, n: int) -> int:
+    """``observation_slots``: None → n − 1; else a whole number ≥ n − 1."""
+    if slots is None:
+        return n - 1
+    if isinstance(slots, bool) or not isinstance(slots, (int, np.integer)) or slots < n - 1:
+        raise ConfigError(
+            f"observation_slots must be None or a whole number ≥ n_vessels − 1 = {n - 1} (one slot per other "
+            f"vessel), got {slots!r}"
+        )
+    return int(slots)
 
 
 def _resolve_formation(formation: Any, n: int) -> np.ndarray:

@@ -237,6 +237,12 @@ class Settings:
             period, which removes the steady cross-track error a current
             leaves. 0: the paper's LOS (12). Choose σ above the largest cross
             current. Only at ``speed``; at the other levels the policy steers.
+        observation_slots: number of slots in each observation; None (the
+            default): one per other vessel, n − 1. A larger number pads the
+            observation with empty slots (every entry 0, so ``linked`` = 0,
+            as for a vessel it does not hear), which gives teams of different
+            sizes one observation length: a policy over slots (attention, a
+            graph network) trains on several team sizes at once.
     """
 
     name: str = "custom"
@@ -272,6 +278,7 @@ class Settings:
     los_integral_gain: float = 0.0
     path: Any = field(default_factory=StraightPath)
     corridor: Any = None
+    observation_slots: Any = None
 
 
 #: The lawnmower route of the ``survey`` presets (docs/paths.md).
