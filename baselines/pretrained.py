@@ -31,6 +31,10 @@ Two network kinds:
     (SB3's deterministic action, the Gaussian's mean clipped to the action
     space) or ``tanh`` (TorchRL's tanh-squashed Gaussian's mode). It exists
     for one team size.
+``slots``
+    the same, after a graph network over the observation's slots
+    (:func:`slot_features`, ``training.slot_policy``): it takes any number
+    of slots, so any team size.
 
 Files are written by :func:`export_run` (from an SB3 ``training.train`` run or
 a ``training.torchrl_ppo`` run), atomically; ``python -m baselines.pretrained
@@ -52,6 +56,7 @@ import numpy as np
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -70,7 +75,7 @@ __all__ = [
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 #: Version of the file format (the header's ``format``).
 FORMAT = 1
-KINDS = ("mlp",)
+KINDS = ("mlp", "slots")
 SQUASHES = ("clip", "tanh")
 
 
@@ -116,6 +121,7 @@ class MLPPolicy(BatchPolicy):
         weights, biases: layer ``k`` maps ``x ↦ x @ weights[k] + biases[k]``; tanh between layers.
         mean, std, clip: the observation normalization ``clip((obs − mean) / std, ±clip)``.
         squash: ``clip`` (to [−1, 1]) or ``tanh``, applied to the first ``action_dim`` outputs.
+        features: the weights of :func:`slot_features` (a ``slots`` network: any number of slots), or None.
     """
 
     def __init__(
@@ -127,6 +133,7 @@ class MLPPolicy(BatchPolicy):
         clip: float,
         squash: str,
         action_dim: int,
+        features: dict[str, np.ndarray] | None = None,
     ) -> None:
         if squash not in SQUASHES:
             raise ValueError(f"squash must be one of {list(SQUASHES)}, got {squash!r}")
@@ -136,16 +143,20 @@ class MLPPolicy(BatchPolicy):
         self.std = np.asarray(std, dtype=np.float64)
         self.clip = float(clip)
         self.squash = squash
-        self.observation_dim = int(self.weights[0].shape[0])
+        self.features = None if features is None else {k: np.asarray(v, dtype=np.float64) for k, v in features.items()}
+        #: the observation length it takes (None: any 10 + 4·slots, a ``slots`` network)
+        self.observation_dim: int | None = int(self.weights[0].shape[0]) if features is None else None
         self.action_dim = int(action_dim)
         #: the header of the file it was loaded from (:func:`load_pretrained`), else None
         self.info: PretrainedInfo | None = None
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.shape[-1] != self.observation_dim:
+        if self.observation_dim is not None and obs.shape[-1] != self.observation_dim:
             raise ValueError(f"observations of size {obs.shape[-1]} given, this policy takes {self.observation_dim}")
         x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
+        if self.features is not None:
+            x = slot_features(x, self.features)
         for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             x = x @ w + b
             if k < len(self.weights) - 1:
@@ -159,11 +170,14 @@ class MLPPolicy(BatchPolicy):
         out = {"mean": self.mean, "std": self.std, "clip": np.array(self.clip), "squash": np.array(self.squash)}
         for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             out[f"w{k}"], out[f"b{k}"] = w, b
+        for name, value in (self.features or {}).items():
+            out[f"features_{name}"] = value
         return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], action_dim: int) -> MLPPolicy:
         layers = sum(1 for key in arrays if key.startswith("w"))
+        features = {key[len("features_") :]: value for key, value in arrays.items() if key.startswith("features_")}
         return cls(
             [arrays[f"w{k}"] for k in range(layers)],
             [arrays[f"b{k}"] for k in range(layers)],
@@ -172,7 +186,36 @@ class MLPPolicy(BatchPolicy):
             float(arrays["clip"]),
             str(arrays["squash"]),
             action_dim,
+            features or None,
         )
+
+
+#: Fixed scales of the own entries of a slot network (``training.slot_policy``): e [m], ψ [rad], u, v [m/s],
+#: r [rad/s], u_d [m/s], u̇_d [m/s²], κ, κ ahead [1/m], D_y [m].
+OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 50.0])
+#: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
+SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
+
+
+def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
+    """``training.slot_policy.SlotFeatures`` in numpy (float64); ``weights``: ``{name: array}``, layers ``x @ w + b``.
+
+    ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``.
+    """
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
+        raise ValueError(f"an observation of size {obs.shape[-1]} is not 10 + 4·slots")
+    own = obs[..., :OWN_SIZE]
+    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE)
+    own = own / OWN_SCALE
+    slots = slots / SLOT_SCALE
+    heard = (slots[..., :1] > 0.5).astype(np.float64)
+    pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], OWN_SIZE)), slots], axis=-1)
+    h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
+    messages = np.tanh(h @ weights["message_w1"] + weights["message_b1"]) * heard
+    total = messages.sum(axis=-2)
+    mean = total / np.maximum(heard.sum(axis=-2), 1.0)
+    return np.concatenate([np.tanh(own @ weights["own_w0"] + weights["own_b0"]), total, mean], axis=-1)
 
 
 # ----------------------------------------------------------------------------- files
@@ -265,6 +308,7 @@ def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     policy, config = load_learned_policy(run)
     model = policy.model
     net = model.policy
+    features = _sb3_slot_features(net)
     layers = [m for m in net.mlp_extractor.policy_net if isinstance(m, nn.Linear)] + [net.action_net]
     activations = {type(m) for m in net.mlp_extractor.policy_net if not isinstance(m, nn.Linear)}
     if activations - {nn.Tanh}:
@@ -273,14 +317,36 @@ def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
         raise ValueError(f"{run}: not an MlpPolicy")
     dim = policy.observation_dim
     if policy.normalizer is not None and policy.normalizer.norm_obs:
+        if features is not None:
+            raise ValueError(f"{run}: a slot network must read raw observations (normalize: {{norm_obs: false}})")
         rms = policy.normalizer.obs_rms
         mean, std = rms.mean, np.sqrt(rms.var + policy.normalizer.epsilon)
         clip = float(policy.normalizer.clip_obs)
+    elif features is not None:
+        mean, std, clip = np.zeros(()), np.ones(()), np.inf  # any length
     else:
         mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
     weights = [m.weight.detach().double().numpy().T.copy() for m in layers]
     biases = [m.bias.detach().double().numpy().copy() for m in layers]
-    return MLPPolicy(weights, biases, mean, std, clip, "clip", policy.action_dim), config
+    return MLPPolicy(weights, biases, mean, std, clip, "clip", policy.action_dim, features), config
+
+
+def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
+    """The weights of an SB3 policy's ``SlotFeatures`` extractor (None: it has the plain flatten extractor)."""
+    extractor = net.features_extractor
+    if type(extractor).__name__ != "SlotFeatures":
+        if not getattr(net, "share_features_extractor", True):
+            raise ValueError("only policies with one shared features extractor can be exported")
+        return None
+
+    def linear(module: Any) -> tuple[np.ndarray, np.ndarray]:
+        return module.weight.detach().double().numpy().T.copy(), module.bias.detach().double().numpy().copy()
+
+    out: dict[str, np.ndarray] = {}
+    out["message_w0"], out["message_b0"] = linear(extractor.message[0])
+    out["message_w1"], out["message_b1"] = linear(extractor.message[2])
+    out["own_w0"], out["own_b0"] = linear(extractor.own[0])
+    return out
 
 
 def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
@@ -350,9 +416,10 @@ def export_run(
         scenario=scenario,
         env_kwargs=json.loads(json.dumps(env_kwargs)),
         action_level=cfg.action_level,
-        n_vessels=cfg.n_vessels,
+        n_vessels=None if policy.features is not None else cfg.n_vessels,
         observation_dim=policy.observation_dim,
         action_dim=policy.action_dim,
+        kind="mlp" if policy.features is None else "slots",
         description=description,
         training={"pipeline": pipeline, "seed": config.get("seed"), **(training or {})},
         evaluation=measured,

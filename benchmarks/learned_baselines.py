@@ -21,10 +21,15 @@ row                    budget   config (``training/configs/``)
 ``acoustic_speed``     30 min   ``acoustic_speed_ppo.yaml`` (SB3 PPO)
 ``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO)
 ``survey_speed``       30 min   ``survey_speed_ppo.yaml`` (SB3 PPO)
+``any_n_speed``        30 min   ``any_n_speed_ppo.yaml`` (SB3 PPO, slot network, teams of 3–6)
 =====================  =======  =====================================================
 
 The budgets of ``paper_*`` and ``survey_speed`` are the learning issue's; it
-gives none for the ``acoustic`` rows, which get 30 minutes.
+gives none for the ``acoustic`` and ``any_n`` rows, which get 30 minutes.
+``any_n_speed`` is evaluated not on its training teams but, without
+retraining, on teams of 8, 12 and 20 vessels on ``ring``, ``chain`` and
+``random`` graphs (one sub-row each; its row is their mean, and its target
+holds when every sub-row's does).
 
 Per row the table gives, as mean ± sample standard deviation over the
 training seeds (each seed's number is the mean over the evaluation
@@ -91,6 +96,8 @@ class Row:
     minutes: float
     config: str  # relative to training/configs; torchrl/… runs training.torchrl_ppo, the rest training.train
     note: str = ""
+    #: (team size, topology) pairs it is evaluated on instead of its training scenario (a policy for any team)
+    generalization: tuple[tuple[int, str], ...] = ()
 
     @property
     def pipeline(self) -> str:
@@ -111,8 +118,17 @@ ROWS: dict[str, Row] = {
         Row("acoustic_speed", 30.0, "acoustic_speed_ppo.yaml"),
         Row("acoustic_guidance", 30.0, "acoustic_guidance_ppo.yaml"),
         Row("survey_speed", 30.0, "survey_speed_ppo.yaml"),
+        Row(
+            "any_n_speed",
+            30.0,
+            "any_n_speed_ppo.yaml",
+            "one policy for any team size",
+            tuple((n, topology) for n in (8, 12, 20) for topology in ("ring", "chain", "random")),
+        ),
     )
 }
+#: Settings of a team's training scenario that a generalization row replaces.
+TEAM_KEYS = ("n_vessels", "topology", "topology_seed", "observation_slots", "formation", "initial_state")
 
 
 def _train_command(row: Row, seed: int, minutes: float, folder: Path) -> list[str]:
@@ -132,15 +148,42 @@ def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
     return config["scenario"], dict(config["env_kwargs"])
 
 
-def evaluate_folder(folder: Path, episodes: int) -> dict[str, Any]:
-    """The run's policy, the reference (and the extrapolating reference over a lossy channel) on the same seeds."""
-    from baselines.engine import episode_reports
-    from baselines.reference import ReferencePolicy
+def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:
+    """The run's policy, the reference (and the extrapolating reference over a lossy channel) on the same seeds.
+
+    A row with ``generalization`` settings runs its policy (exported as a numpy network, which takes any
+    number of slots) on each of them instead; ``learned`` and ``reference`` are then the means over them.
+    """
     from marine_formation_env.env import parallel_env
     from training.learned import load_learned_policy
 
     policy, config = load_learned_policy(folder)
-    env = parallel_env(config["scenario"], **config["env_kwargs"])
+    if row is None or not row.generalization:
+        env = parallel_env(config["scenario"], **config["env_kwargs"])
+        return _evaluate_members(policy, env, episodes)
+    from baselines.pretrained import export_run, load_pretrained
+
+    export_run(folder, row.name, row.note, folder / "exported")
+    portable, _ = load_pretrained(row.name, folder / "exported")
+    base = {k: v for k, v in config["env_kwargs"].items() if k not in TEAM_KEYS}
+    settings = {}
+    for n, topology in row.generalization:
+        env = parallel_env(config["scenario"], **base, n_vessels=n, topology=topology)
+        settings[f"n{n}_{topology}"] = _evaluate_members(portable, env, episodes)
+    first = next(iter(settings.values()))
+    out: dict[str, Any] = {"seeds": first["seeds"], "settings": settings}
+    for member in ("learned", "reference"):
+        out[member] = {
+            key: float(np.mean([s[member][key] for s in settings.values()]))
+            for key in ("return", "success", "action_change", "final_spread")
+        }
+    return out
+
+
+def _evaluate_members(policy: Any, env: Any, episodes: int) -> dict[str, Any]:
+    from baselines.engine import episode_reports
+    from baselines.reference import ReferencePolicy
+
     seeds = [EVAL_SEED + k for k in range(episodes)]
     policies: dict[str, Any] = {"learned": policy, "reference": ReferencePolicy(env)}
     if not env.config.ideal_observations:
@@ -180,7 +223,7 @@ def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, 
         "minutes": minutes,
         "episodes": episodes,
         "wall_seconds": round(time.perf_counter() - begin, 1),
-        **evaluate_folder(folder, episodes),
+        **evaluate_folder(folder, episodes, row),
     }
     atomic_write_text(result, json.dumps(record, indent=2) + "\n")
     return record
@@ -206,6 +249,22 @@ def row_summary(row: Row, records: list[dict[str, Any]]) -> dict[str, Any]:
     members = [m for m in ("learned", "reference", "reference_extrapolate") if m in ok[0]]
     for member in members:
         summary[member] = {key: _stats([r[member][key] for r in ok]) for key in ("return", "success", "action_change")}
+    _judge(row, summary, ok)
+    if row.generalization and all("settings" in r for r in ok):
+        summary["settings"] = {}
+        for key in ok[0]["settings"]:
+            part = [{**r["settings"][key], "seed": r["seed"]} for r in ok]
+            sub: dict[str, Any] = {m: {k: _stats([p[m][k] for p in part]) for k in ("return", "success",
+                                   "action_change")} for m in ("learned", "reference")}  # fmt: skip
+            _judge(row, sub, part)
+            summary["settings"][key] = sub
+        summary["target_met"] = all(sub["target_met"] for sub in summary["settings"].values())
+        summary["smoothness_met"] = all(sub["smoothness_met"] for sub in summary["settings"].values())
+    return summary
+
+
+def _judge(row: Row, summary: dict[str, Any], ok: list[dict[str, Any]]) -> None:
+    """Add ``performance``, ``smoothness_ratio``, ``target_met`` (and ``smoothness_met`` at speed) to ``summary``."""
     performance = _stats([r["reference"]["return"] / r["learned"]["return"] for r in ok])
     smoothness = _stats([r["learned"]["action_change"] / max(r["reference"]["action_change"], 1e-12) for r in ok])
     summary["performance"], summary["smoothness_ratio"] = performance, smoothness
@@ -217,7 +276,6 @@ def row_summary(row: Row, records: list[dict[str, Any]]) -> dict[str, Any]:
         summary["target_met"] = bool(performance["mean"] >= PERFORMANCE_TARGET and success >= SUCCESS_TARGET)
     if row.name.endswith("_speed"):
         summary["smoothness_met"] = bool(smoothness["mean"] <= SMOOTHNESS_TARGET)
-    return summary
 
 
 def _pm(stats: dict[str, Any] | None, fmt: str) -> str:
@@ -252,6 +310,18 @@ def format_table(summaries: list[dict[str, Any]], budgets: dict[str, float]) -> 
             f"| {_pm(learned['action_change'], '{:.3g}')} / {_pm(reference['action_change'], '{:.3g}')} "
             f"| {channel} | {target} |"
         )
+        for key, sub in s.get("settings", {}).items():
+            size, topology = key[1:].split("_", 1)
+            mark = "met" if sub["target_met"] else "not met"
+            mark += ", smooth" if sub["smoothness_met"] else ", not smooth"
+            lines.append(
+                f"| ↳ n = {size}, `{topology}` | | | "
+                f"| {_pm(sub['learned']['return'], '{:.1f}')} | {_pm(sub['reference']['return'], '{:.1f}')} "
+                f"| {_pm(sub['performance'], '{:.2f}')} "
+                f"| {_pm(sub['learned']['success'], '{:.0%}')} / {_pm(sub['reference']['success'], '{:.0%}')} "
+                f"| {_pm(sub['learned']['action_change'], '{:.3g}')} / "
+                f"{_pm(sub['reference']['action_change'], '{:.3g}')} | – | {mark} |"
+            )
     return "\n".join(lines)
 
 

@@ -215,9 +215,7 @@ def _jaxmarl_batched(b: int, min_seconds: float, repeats: int, scan: bool) -> di
     keys = jax.random.split(jax.random.PRNGKey(0), b)
     _, state = jax.vmap(env.reset)(keys)
     rng = np.random.default_rng(0)
-    pool = [
-        {a: jnp.asarray(rng.uniform(0.0, 1.0, (b, dim)), dtype=jnp.float32) for a in agents} for _ in range(8)
-    ]
+    pool = [{a: jnp.asarray(rng.uniform(0.0, 1.0, (b, dim)), dtype=jnp.float32) for a in agents} for _ in range(8)]
     one_step = jax.vmap(env.step, in_axes=(0, 0, 0))
 
     if scan:
@@ -583,8 +581,11 @@ def format_report(report: dict[str, Any]) -> str:
                 f"| {n} | {rate(ideal, 'env_steps_per_s')} | {rate(ideal, 'vessel_steps_per_s')} | "
                 f"{rate(acoustic, 'env_steps_per_s')} | {rate(acoustic, 'vessel_steps_per_s')} |"
             )
-        exponents = [f"{links} {scaling[links]['exponent']:.2f}" for links in ("ideal", "acoustic")
-                     if "exponent" in scaling[links]]
+        exponents = [
+            f"{links} {scaling[links]['exponent']:.2f}"
+            for links in ("ideal", "acoustic")
+            if "exponent" in scaling[links]
+        ]
         lines += ["", f"Cost per env-step grows as n^k with k = {', '.join(exponents)} (least squares over n)."]
     first = report.get("first_step_seconds")
     if first:
@@ -594,8 +595,11 @@ def format_report(report: dict[str, Any]) -> str:
             f"numba with an empty cache {first['numba_cold']:.2f}, with the cache filled {first['numba_warm']:.2f}, "
             f"numpy backend {first['numpy']:.2f}.",
         ]
-    lines += ["", "Rates are medians of the timed repeats after a warm-up through episode ends; in brackets the "
-              "slowest and the fastest repeat."]
+    lines += [
+        "",
+        "Rates are medians of the timed repeats after a warm-up through episode ends; in brackets the "
+        "slowest and the fastest repeat.",
+    ]
     ar = report["arithmetic"]
     lines.append("")
     lines.append(
@@ -615,9 +619,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = ArgumentParser(
-        prog="python -m benchmarks.throughput", description=__doc__.split("\n\n")[0]
-    )
+    parser = ArgumentParser(prog="python -m benchmarks.throughput", description=__doc__.split("\n\n")[0])
     parser.add_argument("--worker", nargs=4, metavar=("CASE", "B", "SECONDS", "REPEATS"), help=argparse.SUPPRESS)
     parser.add_argument("--batch-sizes", type=int, nargs="+", default=list(BATCH_SIZES))
     parser.add_argument("--seconds", type=float, default=2.0, help="minimum seconds per timing repeat (default 2)")

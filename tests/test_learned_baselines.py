@@ -109,7 +109,28 @@ def test_every_row_s_config_exists_and_names_its_scenario():
     for row in lb.ROWS.values():
         config = load_config(row.path)
         scenario, level = row.name.rsplit("_", 1)
-        assert config["scenario"] == scenario and config["env_kwargs"]["action_level"] == level, row.name
+        expected = "paper" if row.generalization else scenario
+        assert config["scenario"] == expected and config["env_kwargs"]["action_level"] == level, row.name
+
+
+def test_the_any_team_row_is_judged_on_every_team_size_and_graph():
+    row = lb.ROWS["any_n_speed"]
+    assert row.generalization == tuple((n, t) for n in (8, 12, 20) for t in ("ring", "chain", "random"))
+
+    def member(value, success):
+        return {"return": value, "returns": [value], "success": success, "action_change": 0.01}
+
+    settings = {"n8_ring": {"learned": member(-100.0, 1.0), "reference": member(-95.0, 1.0)},
+                "n20_chain": {"learned": member(-200.0, 1.0), "reference": member(-100.0, 1.0)}}  # fmt: skip
+    record = {"row": row.name, "seed": 0, "seeds": [10_000], "settings": settings,
+              "learned": member(-150.0, 1.0), "reference": member(-97.5, 1.0)}  # fmt: skip
+    s = lb.row_summary(row, [record])
+    assert s["settings"]["n8_ring"]["target_met"] and not s["settings"]["n20_chain"]["target_met"]
+    assert s["settings"]["n20_chain"]["performance"]["mean"] == 0.5
+    assert not s["target_met"]  # one team size fails: the row fails
+    table = lb.format_table([s], {row.name: 30.0}).splitlines()
+    assert table[3].startswith("| ↳ n = 8, `ring` |") and table[3].endswith("| met, smooth |")
+    assert table[4].startswith("| ↳ n = 20, `chain` |") and "| 0.50 |" in table[4]
 
 
 @pytest.mark.slow

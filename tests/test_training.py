@@ -395,7 +395,7 @@ def test_shipped_config_builds_its_algorithm_without_warnings(path):
     # YAML 1.1 reads `3.0e6` as a string (test_shipped_config_validates); read it as the number it means here
     raw["n_timesteps"] = int(float(raw["n_timesteps"]))
     resolved = validate(raw)
-    venv = SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **resolved["env_kwargs"])
+    venv = train_module.build_env(resolved, 0)  # every team of the config (``teams``), as training builds it
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         algo_class(resolved["algo"])(resolved["policy"], venv, device="cpu", **algo_kwargs(resolved))

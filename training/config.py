@@ -19,11 +19,19 @@ A config file holds one mapping under the env id::
       learning_rate: 3.0e-4      # every other key is a hyperparameter of the algorithm
       n_steps: 128
 
+``teams`` (a list of env overrides, default empty) trains one policy on
+several teams at once: each item, laid over ``env_kwargs``, is a team of its
+own with ``n_envs`` formations (``{n_vessels: 5, topology: random,
+topology_seed: 2}``), and every team's observations are padded to the
+largest team's length (``observation_slots``), so the policy must read slots
+(``features_extractor_class: slots``, :mod:`training.slot_policy`).
+
 Hyperparameter names are checked against the algorithm's constructor, env
 overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
 unknown keys raise :class:`TrainConfigError` naming them. ``learning_rate``
 may be ``lin_<value>`` (linear decay to 0, as in the zoo); ``activation_fn`` is
-a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``).
+a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``), and so is
+``features_extractor_class`` (``slots``: :class:`training.slot_policy.SlotFeatures`).
 
 Values SB3 or torch would choke on (or, worse, accept and fail on much later)
 are refused here by name: ``n_steps``, ``batch_size``, ``n_epochs``,
@@ -60,6 +68,7 @@ __all__ = [
     "apply_overrides",
     "config_differences",
     "load_config",
+    "team_overrides",
     "validate",
 ]
 
@@ -76,6 +85,7 @@ SPECIAL_KEYS = {
     "eval_freq": 100_000,
     "eval_episodes": 3,
     "checkpoint_freq": 500_000,
+    "teams": [],
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -104,6 +114,8 @@ NUMBER_RANGES: dict[str, tuple[float | None, float | None]] = {
 #: Hyperparameters that must be numbers > 0.
 POSITIVE_NUMBERS = ("learning_rate", "clip_range", "max_grad_norm")
 ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+#: Names of ``policy_kwargs.features_extractor_class``.
+EXTRACTORS = ("slots",)
 _NOT_HYPERPARAMS = {"self", "policy", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model"}
 
 
@@ -198,6 +210,39 @@ def _same_number(a: Any, b: Any) -> bool:
     )  # fmt: skip
 
 
+def team_overrides(resolved: dict[str, Any]) -> list[dict[str, Any]]:
+    """The env overrides of each team of a resolved config (one team: ``env_kwargs``), padded to one length."""
+    teams = resolved.get("teams") or [{}]
+    merged = [{**resolved["env_kwargs"], **team} for team in teams]
+    if len(merged) > 1:
+        slots = max(make_config(resolved["scenario"], **kw).n_vessels for kw in merged) - 1
+        for kw in merged:
+            kw.setdefault("observation_slots", slots)
+    return merged
+
+
+def _check_teams(resolved: dict[str, Any]) -> None:
+    teams = resolved["teams"]
+    if not isinstance(teams, list) or not all(isinstance(team, dict) for team in teams):
+        raise TrainConfigError(f"teams must be a list of mappings of env overrides, got {teams!r}")
+    if not teams:
+        return
+    for k, team in enumerate(teams):  # each team on its own first, so an error names it
+        try:
+            make_config(resolved["scenario"], **{**resolved["env_kwargs"], **team})
+        except ConfigError as err:
+            raise TrainConfigError(f"teams[{k}]: {err}") from None
+    dims = set()
+    for k, kw in enumerate(team_overrides(resolved)):
+        try:
+            cfg = make_config(resolved["scenario"], **kw)
+        except ConfigError as err:
+            raise TrainConfigError(f"teams[{k}]: {err}") from None
+        dims.add((cfg.observation_slots, cfg.action_level))
+    if len(dims) > 1:
+        raise TrainConfigError(f"teams must share observation_slots and action_level, got {sorted(dims)}")
+
+
 def apply_overrides(config: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
     """Apply ``{"a.b": value}`` overrides (dots address nested mappings) to a copy of ``config``."""
     out = copy.deepcopy(config)
@@ -248,6 +293,12 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     act = resolved["policy_kwargs"].get("activation_fn")
     if act is not None and act not in ACTIVATIONS:
         raise TrainConfigError(f"policy_kwargs.activation_fn must be one of {list(ACTIVATIONS)}, got {act!r}")
+    extractor = resolved["policy_kwargs"].get("features_extractor_class")
+    if extractor is not None and extractor not in EXTRACTORS:
+        raise TrainConfigError(
+            f"policy_kwargs.features_extractor_class must be one of {list(EXTRACTORS)}, got {extractor!r}"
+        )
+    _check_teams(resolved)
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
         _parse_schedule(lr)
@@ -406,6 +457,10 @@ def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:
             "elu": torch.nn.ELU,
             "leaky_relu": torch.nn.LeakyReLU,
         }[policy_kwargs["activation_fn"]]
+    if policy_kwargs.get("features_extractor_class") == "slots":
+        from training.slot_policy import SlotFeatures
+
+        policy_kwargs["features_extractor_class"] = SlotFeatures
     if policy_kwargs:
         kwargs["policy_kwargs"] = policy_kwargs
     return kwargs

@@ -106,9 +106,14 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     """The SB3 training env: shared-policy adapter, episode monitor, optional VecNormalize."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from training.vec_env import SharedPolicyVecEnv
+    from training.config import team_overrides
+    from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
-    venv: Any = SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **resolved["env_kwargs"])
+    teams = team_overrides(resolved)
+    if len(teams) == 1:
+        venv: Any = SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **teams[0])
+    else:
+        venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **kw) for kw in teams])
     venv.seed(seed)
     venv = VecMonitor(venv)
     norm = resolved["normalize"]

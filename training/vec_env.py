@@ -11,6 +11,10 @@ finish together; their infos then carry ``terminal_observation`` (SB3's
 convention) and ``TimeLimit.truncated``, and the returned observations are
 already those of the next episode. ``seed(s)`` makes formation ``b`` start from
 ``s + b`` at the next ``reset()``, exactly as ``parallel_env(...).reset(seed=s + b)``.
+
+:class:`TeamsVecEnv` puts several of them side by side (teams of different
+sizes or graphs whose observations share one length, ``observation_slots``):
+one policy trains on all of them at once.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices,
 from marine_formation_env.frontend import REWARD_INFO_KEYS
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-__all__ = ["SharedPolicyVecEnv"]
+__all__ = ["SharedPolicyVecEnv", "TeamsVecEnv"]
 
 
 class SharedPolicyVecEnv(VecEnv):
@@ -124,3 +128,108 @@ class SharedPolicyVecEnv(VecEnv):
         if isinstance(indices, int):
             return [indices]
         return indices
+
+
+class TeamsVecEnv(VecEnv):
+    """Several :class:`SharedPolicyVecEnv` (teams) as one SB3 ``VecEnv``: their entries one after the other.
+
+    Every team must have the same action space and observation length (pad
+    the observations with ``observation_slots``); the observation space is
+    the smallest box that holds every team's (each team's bounds follow its
+    workspace and formation). ``seed(s)`` seeds team ``k``
+    with ``s + 100 000·k``, so no two teams' formations share a seed.
+
+    Args:
+        teams: the teams, in entry order.
+    """
+
+    #: Seed offset between consecutive teams.
+    SEED_STRIDE = 100_000
+
+    def __init__(self, teams: Sequence[SharedPolicyVecEnv]) -> None:
+        if not teams:
+            raise ValueError("TeamsVecEnv needs at least one team")
+        first = teams[0]
+        for k, team in enumerate(teams):
+            shape = team.observation_space.shape
+            if shape != first.observation_space.shape or team.action_space != first.action_space:
+                raise ValueError(
+                    f"team {k} has observations of shape {shape} and action space {team.action_space}, team 0 "
+                    f"{first.observation_space.shape} and {first.action_space}: pad with observation_slots"
+                )
+        boxes = [team.observation_space for team in teams]
+        if not all(isinstance(box, gym.spaces.Box) for box in boxes):
+            raise ValueError("every team's observation space must be a Box")
+        low = np.min([box.low for box in boxes if isinstance(box, gym.spaces.Box)], axis=0)
+        high = np.max([box.high for box in boxes if isinstance(box, gym.spaces.Box)], axis=0)
+        self.teams = list(teams)
+        self.bounds = np.cumsum([0] + [team.num_envs for team in teams])
+        self.render_mode = None
+        space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        super().__init__(int(self.bounds[-1]), space, first.action_space)
+
+    def reset(self) -> np.ndarray:
+        obs = np.concatenate([team.reset() for team in self.teams])
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        actions = np.asarray(actions)
+        for k, team in enumerate(self.teams):
+            team.step_async(actions[self.bounds[k] : self.bounds[k + 1]])
+
+    def step_wait(self) -> VecEnvStepReturn:
+        parts = [team.step_wait() for team in self.teams]
+        infos: list[dict[str, Any]] = []
+        for part in parts:
+            infos.extend(part[3])
+        return (
+            np.concatenate([p[0] for p in parts]),
+            np.concatenate([p[1] for p in parts]),
+            np.concatenate([p[2] for p in parts]),
+            infos,
+        )
+
+    def seed(self, seed: int | None = None) -> Sequence[int | None]:
+        if seed is None:
+            seed = int(np.random.default_rng().integers(0, 2**31 - 1 - self.SEED_STRIDE * len(self.teams)))
+        out: list[int | None] = []
+        for k, team in enumerate(self.teams):
+            out.extend(team.seed(seed + self.SEED_STRIDE * k))
+        return out
+
+    def close(self) -> None:
+        for team in self.teams:
+            team.close()
+
+    def _entries(self, indices: VecEnvIndices) -> list[tuple[SharedPolicyVecEnv, int]]:
+        if indices is None:
+            chosen: Iterable[int] = range(self.num_envs)
+        elif isinstance(indices, int):
+            chosen = [indices]
+        else:
+            chosen = indices
+        out = []
+        for i in chosen:
+            k = int(np.searchsorted(self.bounds, i, side="right")) - 1
+            out.append((self.teams[k], i - int(self.bounds[k])))
+        return out
+
+    def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
+        return [team.get_attr(attr_name, local)[0] for team, local in self._entries(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        for team in {id(t): t for t, _ in self._entries(indices)}.values():
+            team.set_attr(attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
+        return [team.env_method(method_name, *method_args, indices=local, **method_kwargs)[0]
+                for team, local in self._entries(indices)]  # fmt: skip
+
+    def env_is_wrapped(self, wrapper_class: type[gym.Wrapper], indices: VecEnvIndices = None) -> list[bool]:
+        return [False] * len(self._entries(indices))
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None] * self.num_envs

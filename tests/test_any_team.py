@@ -1,0 +1,159 @@
+"""One policy for any team: the slot network, teams side by side in one SB3 VecEnv, its export.
+
+Truth: what a set function over the heard slots must satisfy whatever its
+weights (the same features under any order of the slots and any number of
+empty slots), the torch extractor and its numpy copy computing the same
+function, and each team's own ``SharedPolicyVecEnv`` stepped alone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+import torch
+from gymnasium import spaces
+
+from baselines.pretrained import export_run, load_pretrained, slot_features
+from marine_formation_env import parallel_env
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from training import train as train_module
+from training.config import TrainConfigError, load_config, team_overrides, validate
+from training.learned import load_learned_policy
+from training.slot_policy import SlotFeatures
+from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
+
+REPO = Path(__file__).resolve().parents[1]
+ANY_N = REPO / "training" / "configs" / "any_n_speed_ppo.yaml"
+
+
+def _observations(rng: np.random.Generator, batch: int, slots: int) -> np.ndarray:
+    own = rng.normal(size=(batch, OWN_SIZE)) * np.array([20, 0.5, 5, 1, 0.1, 5, 0.1, 0.003, 0.003, 50])
+    slot = rng.normal(size=(batch, slots, SLOT_SIZE)) * np.array([1, 30, 2, 5])
+    slot[..., 0] = rng.random((batch, slots)) < 0.6  # link bits
+    slot[slot[..., 0] == 0] = 0.0  # a slot not heard is all zeros, as the env gives it
+    return np.concatenate([own, slot.reshape(batch, -1)], axis=1)
+
+
+def _extractor(slots: int, seed: int = 0) -> SlotFeatures:
+    torch.manual_seed(seed)
+    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * slots,), np.float32)
+    return SlotFeatures(box, hidden=16)
+
+
+def _numpy_weights(extractor: SlotFeatures) -> dict[str, np.ndarray]:
+    def pair(module):
+        return module.weight.detach().double().numpy().T, module.bias.detach().double().numpy()
+
+    out = {}
+    out["message_w0"], out["message_b0"] = pair(extractor.message[0])
+    out["message_w1"], out["message_b1"] = pair(extractor.message[2])
+    out["own_w0"], out["own_b0"] = pair(extractor.own[0])
+    return out
+
+
+def test_the_numpy_slot_features_are_the_torch_extractor_s():
+    extractor = _extractor(5)
+    obs = _observations(np.random.default_rng(0), 64, 5)
+    with torch.no_grad():
+        theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(slot_features(obs, _numpy_weights(extractor)), theirs, atol=2e-5)  # float32 rounding
+    assert theirs.shape == (64, 48)
+
+
+def test_the_features_ignore_the_order_of_the_slots_and_empty_padding():
+    weights = _numpy_weights(_extractor(5, seed=1))
+    rng = np.random.default_rng(1)
+    obs = _observations(rng, 32, 5)
+    features = slot_features(obs, weights)
+    own, slots = obs[:, :OWN_SIZE], obs[:, OWN_SIZE:].reshape(32, 5, SLOT_SIZE)
+    shuffled = np.concatenate([own, slots[:, rng.permutation(5)].reshape(32, -1)], axis=1)
+    padded = np.concatenate([obs, np.zeros((32, 7 * SLOT_SIZE))], axis=1)
+    np.testing.assert_allclose(slot_features(shuffled, weights), features, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(slot_features(padded, weights), features, rtol=1e-12, atol=1e-12)
+    # a slot's content matters only when it is heard: change what an unheard slot holds, nothing changes
+    silent = slots.copy()
+    silent[..., 0] = 0.0
+    alone = np.concatenate([own, silent.reshape(32, -1)], axis=1)
+    nothing = np.concatenate([own, np.zeros((32, 5 * SLOT_SIZE))], axis=1)
+    np.testing.assert_allclose(slot_features(alone, weights), slot_features(nothing, weights), atol=1e-12)
+    with pytest.raises(ValueError, match="an observation of size 13 is not 10 \\+ 4·slots"):
+        slot_features(obs[:, :13], weights)
+
+
+def test_teams_side_by_side_step_as_each_team_alone():
+    kwargs = [
+        {"n_vessels": 3, "topology": "ring", "observation_slots": 4, "horizon": 5.0, "init_noise": {"x": 10.0}},
+        {"n_vessels": 5, "topology": "random", "observation_slots": 4, "horizon": 6.0, "init_noise": {"x": 10.0}},
+    ]
+    together = TeamsVecEnv([SharedPolicyVecEnv(2, "paper", **kw) for kw in kwargs])
+    alone = [SharedPolicyVecEnv(2, "paper", **kw) for kw in kwargs]
+    assert together.num_envs == 6 + 10
+    seeds = together.seed(7)  # formation b of team k starts from 7 + 100 000·k + b
+    assert seeds == [7] * 3 + [8] * 3 + [100_007] * 5 + [100_008] * 5
+    alone[0].seed(7)
+    alone[1].seed(7 + TeamsVecEnv.SEED_STRIDE)
+    obs = together.reset()
+    np.testing.assert_array_equal(obs, np.concatenate([env.reset() for env in alone]))
+    rng = np.random.default_rng(0)
+    for _ in range(14):  # through both teams' episode ends (10 and 12 steps)
+        actions = rng.uniform(-1, 1, (16, 1)).astype(np.float32)
+        obs, reward, done, infos = together.step(actions)
+        parts = [alone[0].step(actions[:6]), alone[1].step(actions[6:])]
+        np.testing.assert_array_equal(obs, np.concatenate([p[0] for p in parts]))
+        np.testing.assert_array_equal(reward, np.concatenate([p[1] for p in parts]))
+        np.testing.assert_array_equal(done, np.concatenate([p[2] for p in parts]))
+        assert [sorted(i) for i in infos] == [sorted(i) for p in parts for i in p[3]]
+    # the space holds every team's (their bounds differ with the workspace)
+    for env in alone:
+        assert np.all(together.observation_space.low <= env.observation_space.low)
+        assert np.all(together.observation_space.high >= env.observation_space.high)
+    with pytest.raises(ValueError, match="pad with observation_slots"):
+        TeamsVecEnv(
+            [
+                SharedPolicyVecEnv(1, "paper", topology="ring"),
+                SharedPolicyVecEnv(1, "paper", n_vessels=4, topology="ring"),
+            ]
+        )
+
+
+def test_the_any_team_config_pads_every_team_to_the_largest():
+    resolved = validate(load_config(ANY_N))
+    teams = team_overrides(resolved)
+    assert sorted({kw["n_vessels"] for kw in teams}) == [3, 4, 5, 6]
+    assert {kw["observation_slots"] for kw in teams} == {5}
+    with pytest.raises(TrainConfigError, match="teams must be a list of mappings"):
+        validate({**load_config(ANY_N), "teams": "all of them"})
+    with pytest.raises(TrainConfigError, match=r"teams\[1\]: .*n_vessels must be an integer ≥ 2, got 1"):
+        validate({**load_config(ANY_N), "teams": [{"n_vessels": 3}, {"n_vessels": 1}]})
+    with pytest.raises(TrainConfigError, match="features_extractor_class must be one of \\['slots'\\], got 'gnn'"):
+        validate({**load_config(ANY_N), "policy_kwargs": {"features_extractor_class": "gnn"}})
+
+
+def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_path):
+    torch.set_num_threads(1)
+    run = tmp_path / "run"
+    argv = ["--config", str(ANY_N), "--seed", "0", "--quiet", "--out", str(run)]
+    for item in ["n_timesteps=2000", "n_envs=1", "env_kwargs.horizon=20.0", "batch_size=576", "checkpoint_freq=0"]:
+        argv += ["--set", item]
+    assert train_module.main(argv) == 0
+    export_run(run, "any_team", "smoke", tmp_path / "shipped")
+    portable, info = load_pretrained("any_team", tmp_path / "shipped")
+    assert info.kind == "slots" and info.n_vessels is None and info.observation_dim is None
+    trained, _ = load_learned_policy(run)
+    env = parallel_env("paper", n_vessels=6, topology="random", observation_slots=5, init_noise={"x": 40.0})
+    obs, _ = env.reset(seed=1)
+    stacked = np.stack(list(obs.values()))
+    np.testing.assert_allclose(portable.act_batch(stacked), trained.act_batch(stacked), atol=2e-5)
+    big = parallel_env("paper", n_vessels=20, topology="ring", init_noise={"x": 40.0})
+    obs, _ = big.reset(seed=1)
+    stacked = np.stack(list(obs.values()))
+    assert stacked.shape == (20, OWN_SIZE + 19 * SLOT_SIZE)
+    actions = portable.act_batch(stacked)
+    assert actions.shape == (20, 1) and np.all(np.abs(actions) <= 1.0)
+    # the same observations padded to 30 slots act the same: the network reads the heard slots only
+    padded = np.concatenate([stacked, np.zeros((20, 11 * SLOT_SIZE))], axis=1)
+    np.testing.assert_allclose(portable.act_batch(padded), actions, atol=1e-6)

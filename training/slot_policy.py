@@ -1,0 +1,73 @@
+"""A policy for any team size: a graph network over the observation's slots (SB3 features extractor).
+
+A vessel's observation is its own part (10 entries) and one 4-entry slot per
+other vessel (``marine_formation_env.rules``); the link bit of a slot says
+whether anything was heard from that vessel. :class:`SlotFeatures` reads
+them as a set:
+
+* every entry is divided by a fixed scale (:data:`OWN_SCALE`,
+  :data:`SLOT_SCALE`: metres by 50, speeds by 5, …), not by running
+  statistics, so the same weights read every team size and the link bit
+  stays a mask;
+* each slot k becomes a message ``m_k = φ([own, slot_k])`` (an MLP, tanh);
+* the messages of the slots heard (link bit 1) are summed and averaged
+  (``Σ_k l_k m_k`` and ``Σ_k l_k m_k / max(1, Σ_k l_k)``): the paper's law
+  (20) sums over the in-neighbours, the mean keeps the scale when a vessel
+  hears many;
+* the features are ``[ψ(own), sum, mean]``; SB3's ``net_arch`` layers and
+  action head follow, as for ``MlpPolicy``.
+
+Nothing depends on the number of slots, so the weights trained on teams of 3
+to 6 (observations padded to one length with ``observation_slots``) act in a
+team of 20, whose observations have 19 slots. Config (``training.train``)::
+
+    policy: MlpPolicy
+    policy_kwargs:
+      features_extractor_class: slots       # this module's SlotFeatures
+      features_extractor_kwargs: {hidden: 64}
+      net_arch: [64, 64]
+
+:func:`baselines.pretrained.slot_features` is the same function in numpy
+(pretrained policies run without torch).
+"""
+
+from __future__ import annotations
+
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from torch import nn
+
+from baselines.pretrained import OWN_SCALE, SLOT_SCALE
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+
+__all__ = ["SlotFeatures"]
+
+
+class SlotFeatures(BaseFeaturesExtractor):
+    """Features ``[ψ(own), Σ heard messages, mean heard message]`` of size ``3 · hidden`` (module docstring)."""
+
+    def __init__(self, observation_space: spaces.Box, hidden: int = 64) -> None:
+        dim = int(observation_space.shape[0])
+        if dim < OWN_SIZE or (dim - OWN_SIZE) % SLOT_SIZE:
+            raise ValueError(f"an observation of size {dim} is not 10 + 4·slots")
+        super().__init__(observation_space, features_dim=3 * hidden)
+        self.hidden = hidden
+        self.own_scale: torch.Tensor
+        self.slot_scale: torch.Tensor
+        self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
+        self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
+        self.message = nn.Sequential(
+            nn.Linear(OWN_SIZE + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
+        )
+        self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        own = observations[..., :OWN_SIZE] / self.own_scale
+        slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE) / self.slot_scale
+        heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
+        pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], OWN_SIZE), slots], dim=-1)
+        messages = self.message(pairs) * heard
+        total = messages.sum(dim=-2)
+        mean = total / heard.sum(dim=-2).clamp(min=1.0)
+        return torch.cat([self.own(own), total, mean], dim=-1)
