@@ -587,7 +587,11 @@ def test_train_api_keeps_working(tmp_path, capsys):
     )  # fmt: skip
     model = train_module.train(resolved, tmp_path / "api", seed=0, progress=False)
     assert model.num_timesteps >= 150
-    assert sorted(p.name for p in (tmp_path / "api").iterdir() if p.name != "tb") == ["model.zip", "vecnormalize.pkl"]
+    assert sorted(p.name for p in (tmp_path / "api").iterdir() if p.name != "tb") == [
+        "model.zip",
+        "progress.csv",
+        "vecnormalize.pkl",
+    ]
     assert train_module.latest_checkpoint(tmp_path / "api") is None
 
 
