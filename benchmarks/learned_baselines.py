@@ -379,7 +379,11 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
 
 
 def plot_episode(row: Row, record: dict[str, Any], out: Path, path: Path) -> None:
-    """One evaluation episode (the first seed) of the row's learned policy beside the reference."""
+    """One evaluation episode (the first seed) of the row's learned policy beside the reference.
+
+    A generalization row shows its largest team on its first graph (20 vessels on a ring), run by the exported
+    numpy network.
+    """
     from baselines.engine import episode_reports
     from baselines.plots import plot_comparison
     from baselines.reference import ReferencePolicy
@@ -389,6 +393,13 @@ def plot_episode(row: Row, record: dict[str, Any], out: Path, path: Path) -> Non
     folder = out / row.name / f"seed_{record['seed']}"
     policy, config = load_learned_policy(folder)
     env = parallel_env(config["scenario"], **config["env_kwargs"])
+    if row.generalization:
+        from baselines.pretrained import load_pretrained
+
+        policy, _ = load_pretrained(row.name, folder / "exported")
+        n, topology = max(row.generalization, key=lambda pair: pair[0])
+        base = {k: v for k, v in config["env_kwargs"].items() if k not in TEAM_KEYS}
+        env = parallel_env(config["scenario"], **base, n_vessels=n, topology=topology)
     seeds = record["seeds"][:1]
     _, learned = episode_reports(policy, env.config, seeds)
     _, reference = episode_reports(ReferencePolicy(env), env.config, seeds)
@@ -510,13 +521,36 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
             training = {"minutes": first["minutes"], "config": row.config, "commit": _commit()}
-            export_run(args.out / row.name / f"seed_{first['seed']}", row.name, row.note or row.name,
-                       training=training, evaluation=_header_evaluation(first))  # fmt: skip
+            folder = args.out / row.name / f"seed_{first['seed']}"
+            header = _header_evaluation(row, first, folder, args.episodes)
+            export_run(folder, row.name, row.note or row.name, training=training, evaluation=header)
     return 0
 
 
-def _header_evaluation(record: dict[str, Any]) -> dict[str, Any]:
-    """What a pretrained policy's header says it measured (``baselines.pretrained``)."""
+def _header_evaluation(row: Row, record: dict[str, Any], folder: Path, episodes: int) -> dict[str, Any]:
+    """What a pretrained policy's header says it measured (``baselines.pretrained``), on its training scenario.
+
+    A generalization row's record holds its other teams; its header is measured on its training team (what the
+    shipped-policy test re-measures) and lists each setting's mean return and success besides.
+    """
+    if row.generalization:
+        from baselines.pretrained import load_pretrained
+        from marine_formation_env.env import parallel_env
+        from training.learned import load_learned_policy
+
+        _, config = load_learned_policy(folder)
+        portable, _ = load_pretrained(row.name, folder / "exported")
+        own = _evaluate_members(portable, parallel_env(config["scenario"], **config["env_kwargs"]), episodes)
+        header = _header_evaluation(Row(row.name, row.minutes, row.config), own, folder, episodes)
+        header["settings"] = {
+            key: {
+                "learned_return": s["learned"]["return"],
+                "reference_return": s["reference"]["return"],
+                "learned_success": s["learned"]["success"],
+            }
+            for key, s in record["settings"].items()
+        }
+        return header
     out = {
         "seeds": record["seeds"],
         "learned_return": record["learned"]["return"],

@@ -145,3 +145,32 @@ def test_a_smoke_run_trains_evaluates_and_plots(tmp_path):
         assert row["seeds"] == [0] and row["learned"]["return"]["mean"] < 0.0
     assert (out / "learning_curves.png").stat().st_size > 0
     assert (out / "episodes" / "paper_guidance.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_publishing_writes_the_table_the_figures_and_loadable_pretrained_policies(tmp_path, monkeypatch):
+    import dataclasses
+
+    import baselines.pretrained as pretrained
+
+    rows = {name: dataclasses.replace(lb.ROWS[name], minutes=0.1) for name in ("paper_speed", "any_n_speed")}
+    monkeypatch.setattr(lb, "ROWS", rows)
+    monkeypatch.setattr(lb, "ROOT", tmp_path)
+    monkeypatch.setattr(pretrained, "PRETRAINED_DIR", tmp_path / "shipped")
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "results.md").write_text("# Results\n")
+    argv = ["--rows", "paper_speed,any_n_speed", "--seeds", "0", "--episodes", "1", "--out", str(tmp_path / "out"),
+            "--publish", "--quiet"]  # fmt: skip
+    assert lb.main(argv) == 0
+    text = (tmp_path / "docs" / "results.md").read_text()
+    assert lb.MARKERS[0] in text and "| `paper_speed` | torchrl | 0.1 | 1 |" in text
+    assert "| ↳ n = 20, `random` |" in text
+    assert (tmp_path / "docs" / "learning_curves.png").is_file()
+    assert (tmp_path / "docs" / "episodes" / "any_n_speed.png").is_file()
+    for name in rows:
+        _, info = pretrained.load_pretrained(name)
+        assert info.training["minutes"] == 0.1 and len(info.evaluation["learned_returns"]) == 1
+    assert pretrained.load_pretrained("any_n_speed")[1].kind == "slots"
+    assert set(pretrained.load_pretrained("any_n_speed")[1].evaluation["settings"]) == {
+        f"n{n}_{t}" for n in (8, 12, 20) for t in ("ring", "chain", "random")
+    }
