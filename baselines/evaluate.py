@@ -185,6 +185,8 @@ def evaluate(
             loaded[spec], info = load_pretrained(spec[len(PRETRAINED_PREFIX) :])
             if not trained_on:
                 trained_on = {"scenario": info.scenario, **info.env_kwargs}
+                if info.n_vessels is None:  # any team: its training padding is no default for another team
+                    trained_on.pop("observation_slots", None)
         elif is_model_path(spec):
             loaded[spec], run_config = load_model(spec)
             if not trained_on:

@@ -46,6 +46,7 @@ from __future__ import annotations
 import io
 import json
 import sys
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -91,7 +92,7 @@ class PretrainedInfo:
         observation_dim: the length of the observation it takes (None: any team size).
         action_dim: the length of its action.
         env_id: the env version whose observation layout it was trained on.
-        kind: ``mlp``.
+        kind: ``mlp`` (one team size) or ``slots`` (any team size).
         description: one line for ``--list-pretrained``.
         training: how it was trained (pipeline, seed, minutes, vessel-steps, commit, config).
         evaluation: what it measured at export (return, success, reference's return, seeds).
@@ -238,7 +239,8 @@ def save_pretrained(policy: MLPPolicy, info: PretrainedInfo, folder: Path | None
     return target
 
 
-def _read(path: Path) -> tuple[dict[str, np.ndarray], PretrainedInfo]:
+def _read(path: Path) -> tuple[MLPPolicy, PretrainedInfo]:
+    """The policy and header of one file (``ValueError`` naming the file if it is not a readable one)."""
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
@@ -247,9 +249,11 @@ def _read(path: Path) -> tuple[dict[str, np.ndarray], PretrainedInfo]:
         if version != FORMAT:
             raise ValueError(f"file format {version}, this version reads {FORMAT}")
         info = PretrainedInfo(**header)
-    except (OSError, KeyError, TypeError, ValueError) as err:
+        policy = MLPPolicy.from_arrays(arrays, info.action_dim)
+    except (OSError, EOFError, zipfile.BadZipFile, KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{path} is not a readable pretrained policy ({type(err).__name__}: {err})") from None
-    return arrays, info
+    policy.info = info
+    return policy, info
 
 
 def list_pretrained(folder: Path | None = None) -> list[PretrainedInfo]:
@@ -267,10 +271,7 @@ def load_pretrained(name: str, folder: Path | None = None) -> tuple[MLPPolicy, P
     if not path.is_file():
         known = [info.name for info in list_pretrained(folder)]
         raise ValueError(f"no pretrained policy {name!r}; shipped: {known}")
-    arrays, info = _read(path)
-    policy = MLPPolicy.from_arrays(arrays, info.action_dim)
-    policy.info = info
-    return policy, info
+    return _read(path)
 
 
 def check_compatible(info: PretrainedInfo, config: ScenarioConfig, observation_dim: int) -> None:
@@ -308,13 +309,13 @@ def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     policy, config = load_learned_policy(run)
     model = policy.model
     net = model.policy
+    if getattr(getattr(net, "mlp_extractor", None), "policy_net", None) is None or not hasattr(net, "action_net"):
+        raise ValueError(f"{run}: not an actor-critic MlpPolicy ({type(net).__name__})")
     features = _sb3_slot_features(net)
     layers = [m for m in net.mlp_extractor.policy_net if isinstance(m, nn.Linear)] + [net.action_net]
     activations = {type(m) for m in net.mlp_extractor.policy_net if not isinstance(m, nn.Linear)}
     if activations - {nn.Tanh}:
         raise ValueError(f"{run}: only tanh networks can be exported, found {sorted(a.__name__ for a in activations)}")
-    if getattr(net, "share_features_extractor", True) is False or net.mlp_extractor.policy_net is None:
-        raise ValueError(f"{run}: not an MlpPolicy")
     dim = policy.observation_dim
     if policy.normalizer is not None and policy.normalizer.norm_obs:
         if features is not None:
@@ -332,11 +333,11 @@ def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
 
 
 def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
-    """The weights of an SB3 policy's ``SlotFeatures`` extractor (None: it has the plain flatten extractor)."""
+    """The weights of an SB3 policy's (actor's) ``SlotFeatures`` extractor; None for SB3's weightless flatten one."""
     extractor = net.features_extractor
     if type(extractor).__name__ != "SlotFeatures":
-        if not getattr(net, "share_features_extractor", True):
-            raise ValueError("only policies with one shared features extractor can be exported")
+        if any(True for _ in extractor.parameters()):
+            raise ValueError(f"cannot export a {type(extractor).__name__} features extractor")
         return None
 
     def linear(module: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -387,12 +388,16 @@ def export_run(
     folder: Path | None = None,
     training: dict[str, Any] | None = None,
     evaluation: dict[str, Any] | None = None,
+    episodes: int = 10,
 ) -> Path:
     """Export the policy of a run folder (SB3 ``training.train`` or ``training.torchrl_ppo``) as ``NAME.npz``.
 
     The header takes the scenario, env overrides and team size from the run's
-    config; ``training`` and ``evaluation`` add what the caller knows (the
-    run's ``evaluation.json`` is read if present).
+    config; ``training`` and ``evaluation`` add what the caller knows. Without
+    an ``evaluation`` the run's ``evaluation.json`` is read, and if it has no
+    per-episode returns (an SB3 run), the trained network (the library's, not
+    the numpy copy) and the reference are run on ``episodes`` seeds (10 000 +)
+    of its training scenario: every header says what its policy scored.
     """
     run = Path(run)
     if not name.replace("_", "").isalnum():
@@ -411,6 +416,8 @@ def export_run(
     summary = (run if run.is_dir() else run.parent) / "evaluation.json"
     if not measured and summary.is_file():
         measured = json.loads(summary.read_text())
+    if "learned_returns" not in measured:  # an SB3 run has no closing evaluation: measure the trained network
+        measured = _measure(run, episodes)
     info = PretrainedInfo(
         name=name,
         scenario=scenario,
@@ -425,6 +432,30 @@ def export_run(
         evaluation=measured,
     )
     return save_pretrained(policy, info, folder)
+
+
+def _measure(run: Path, episodes: int) -> dict[str, Any]:
+    """The run's policy and the reference on ``episodes`` seeds (10 000 +) of its scenario, as ``evaluate_run``."""
+    from baselines.engine import episode_reports
+    from baselines.reference import ReferencePolicy
+    from marine_formation_env.env import parallel_env
+    from training.learned import load_learned_policy
+
+    policy, config = load_learned_policy(run)
+    env = parallel_env(config["scenario"], **config["env_kwargs"])
+    seeds = [10_000 + k for k in range(episodes)]
+    learned, _ = episode_reports(policy, env.config, seeds)
+    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
+    return {
+        "seeds": seeds,
+        "learned_return": float(np.mean([m["return"] for m in learned])),
+        "learned_returns": [m["return"] for m in learned],
+        "learned_success": float(np.mean([m["success"] for m in learned])),
+        "reference_return": float(np.mean([m["return"] for m in reference])),
+        "reference_success": float(np.mean([m["success"] for m in reference])),
+        "learned_action_change": float(np.mean([m["action_change"] for m in learned])),
+        "reference_action_change": float(np.mean([m["action_change"] for m in reference])),
+    }
 
 
 # ----------------------------------------------------------------------------- command line

@@ -63,6 +63,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import time
@@ -209,7 +210,9 @@ def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, 
         record: dict[str, Any] = json.loads(result.read_text())
         if record.get("minutes") == minutes and record.get("episodes") == episodes:
             return record
-    folder.mkdir(parents=True, exist_ok=True)
+    if folder.exists():  # an earlier, unfinished or other-budget run of this row and seed: start clean
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
     begin = time.perf_counter()
     done = subprocess.run(_train_command(row, seed, minutes, folder), cwd=ROOT, capture_output=True, text=True)
     atomic_write_text(folder / "train.log", done.stdout + "\n--- stderr ---\n" + done.stderr)

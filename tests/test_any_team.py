@@ -129,11 +129,20 @@ def test_the_any_team_config_pads_every_team_to_the_largest():
         validate({**load_config(ANY_N), "teams": "all of them"})
     with pytest.raises(TrainConfigError, match=r"teams\[1\]: .*n_vessels must be an integer ≥ 2, got 1"):
         validate({**load_config(ANY_N), "teams": [{"n_vessels": 3}, {"n_vessels": 1}]})
+    # the scenario of evaluations and exports gets the teams' length: an SB3 model trained on the teams can act in it
+    speed = load_config(REPO / "training" / "configs" / "paper_speed_ppo.yaml")
+    mixed = validate({**speed, "teams": [{"n_vessels": 3}, {"n_vessels": 4, "topology": "ring"}]})
+    assert mixed["env_kwargs"]["observation_slots"] == 3
+    assert [kw["observation_slots"] for kw in team_overrides(mixed)] == [3, 3]
+    with pytest.raises(TrainConfigError, match=r"teams\[1\] has observation_slots = 7 .* env_kwargs .* 3"):
+        validate({**speed, "teams": [{"n_vessels": 3}, {"n_vessels": 4, "topology": "ring", "observation_slots": 7}]})
+    with pytest.raises(TrainConfigError, match="'slots' reads the link bits of raw observations"):
+        validate({**speed, "policy_kwargs": {"features_extractor_class": "slots"}})  # normalize: true
     with pytest.raises(TrainConfigError, match="features_extractor_class must be one of \\['slots'\\], got 'gnn'"):
         validate({**load_config(ANY_N), "policy_kwargs": {"features_extractor_class": "gnn"}})
 
 
-def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_path):
+def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_path, monkeypatch):
     torch.set_num_threads(1)
     run = tmp_path / "run"
     argv = ["--config", str(ANY_N), "--seed", "0", "--quiet", "--out", str(run)]
@@ -154,6 +163,15 @@ def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_pa
     assert stacked.shape == (20, OWN_SIZE + 19 * SLOT_SIZE)
     actions = portable.act_batch(stacked)
     assert actions.shape == (20, 1) and np.all(np.abs(actions) <= 1.0)
+    # from the command line, on another team size: the header's padding is not carried over
+    import baselines.pretrained as pretrained
+    from baselines import evaluate as evaluate_module
+
+    monkeypatch.setattr(pretrained, "PRETRAINED_DIR", tmp_path / "shipped")
+    args = ["--policy", "pretrained:any_team", "--policy", "reference", "--set", "n_vessels=12", "--set",
+            "topology=chain", "--set", "horizon=10.0", "--quiet", "--json", str(tmp_path / "twelve.json")]  # fmt: skip
+    assert evaluate_module.main(args) == 0
+    assert '"n_vessels": 12' in (tmp_path / "twelve.json").read_text()
     # the same observations padded to 30 slots act the same: the network reads the heard slots only
     padded = np.concatenate([stacked, np.zeros((20, 11 * SLOT_SIZE))], axis=1)
     np.testing.assert_allclose(portable.act_batch(padded), actions, atol=1e-6)

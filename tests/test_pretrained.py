@@ -90,6 +90,10 @@ def test_unknown_and_unreadable_policies_are_named(tmp_path):
     (tmp_path / "broken.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match=r"broken\.npz is not a readable pretrained policy"):
         load_pretrained("broken", tmp_path)
+    whole = save_pretrained(_tiny_policy(), _info("cut"), tmp_path).read_bytes()
+    (tmp_path / "cut.npz").write_bytes(whole[: len(whole) // 2])  # a copy interrupted half-way
+    with pytest.raises(ValueError, match=r"cut\.npz is not a readable pretrained policy \(BadZipFile"):
+        load_pretrained("cut", tmp_path)
 
 
 @pytest.mark.parametrize(
@@ -162,6 +166,8 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
     path = export_run(run, "sb3_tiny", "smoke", tmp_path / "shipped")
     exported, info = load_pretrained("sb3_tiny", tmp_path / "shipped")
     assert path.stat().st_size < 50_000
+    # no closing evaluation in an SB3 run: the export ran the trained network and the reference on 10 seeds
+    assert info.evaluation["seeds"] == list(range(10_000, 10_010)) and len(info.evaluation["learned_returns"]) == 10
     assert (info.scenario, info.action_level, info.n_vessels, info.training["pipeline"]) == ("paper", "speed", 3, "sb3")
     original, _ = load_learned_policy(run)
     obs = np.stack([o for o, _ in (_observations(s) for s in range(4))]).reshape(-1, info.observation_dim)
@@ -217,3 +223,14 @@ def test_a_shipped_policy_is_small_and_reproduces_the_return_its_header_claims(p
     # the header was measured with the trainer's torch network, this is the numpy copy: float32 against float64
     # rounding in a closed loop that contracts, so the returns agree far inside 1 %
     np.testing.assert_allclose([m["return"] for m in learned], claimed, rtol=1e-2)
+
+
+def test_every_pretrained_policy_the_documentation_names_is_shipped():
+    import re
+
+    named = set()
+    for page in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), REPO / "baselines" / "pretrained.py"]:
+        named |= set(re.findall(r"pretrained:([A-Za-z0-9_]+)", page.read_text()))
+    named -= {"NAME"}
+    shipped = {path.stem for path in SHIPPED}
+    assert named and named <= shipped, f"named in the docs but not shipped: {sorted(named - shipped)}"

@@ -22,9 +22,11 @@ A config file holds one mapping under the env id::
 ``teams`` (a list of env overrides, default empty) trains one policy on
 several teams at once: each item, laid over ``env_kwargs``, is a team of its
 own with ``n_envs`` formations (``{n_vessels: 5, topology: random,
-topology_seed: 2}``), and every team's observations are padded to the
-largest team's length (``observation_slots``), so the policy must read slots
-(``features_extractor_class: slots``, :mod:`training.slot_policy`).
+topology_seed: 2}``). ``env_kwargs`` itself (the scenario of evaluations and
+exports) gets the largest team's ``observation_slots`` unless it sets them,
+every team inherits them, and a team with another observation length or
+level is refused; the policy must read slots (``features_extractor_class:
+slots``, :mod:`training.slot_policy`, with ``normalize: {norm_obs: false}``).
 
 Hyperparameter names are checked against the algorithm's constructor, env
 overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
@@ -211,36 +213,48 @@ def _same_number(a: Any, b: Any) -> bool:
 
 
 def team_overrides(resolved: dict[str, Any]) -> list[dict[str, Any]]:
-    """The env overrides of each team of a resolved config (one team: ``env_kwargs``), padded to one length."""
+    """The env overrides of each team of a resolved config (no ``teams``: ``env_kwargs`` alone).
+
+    With ``teams``, each team is ``env_kwargs`` with the team's overrides on top, and :func:`validate` has
+    given ``env_kwargs`` (the scenario of evaluations and exports) the largest team's ``observation_slots``,
+    which every team inherits unless it sets its own.
+    """
     teams = resolved.get("teams") or [{}]
-    merged = [{**resolved["env_kwargs"], **team} for team in teams]
-    if len(merged) > 1:
-        slots = max(make_config(resolved["scenario"], **kw).n_vessels for kw in merged) - 1
-        for kw in merged:
-            kw.setdefault("observation_slots", slots)
-    return merged
+    return [{**resolved["env_kwargs"], **team} for team in teams]
 
 
 def _check_teams(resolved: dict[str, Any]) -> None:
+    """Check ``teams``; pad ``env_kwargs`` (and so every team) to the largest team's slots; one layout for all."""
     teams = resolved["teams"]
     if not isinstance(teams, list) or not all(isinstance(team, dict) for team in teams):
         raise TrainConfigError(f"teams must be a list of mappings of env overrides, got {teams!r}")
     if not teams:
         return
+    sizes = []
     for k, team in enumerate(teams):  # each team on its own first, so an error names it
         try:
-            make_config(resolved["scenario"], **{**resolved["env_kwargs"], **team})
+            sizes.append(make_config(resolved["scenario"], **{**resolved["env_kwargs"], **team}).n_vessels)
         except ConfigError as err:
             raise TrainConfigError(f"teams[{k}]: {err}") from None
-    dims = set()
+    if "observation_slots" not in resolved["env_kwargs"]:
+        base = make_config(resolved["scenario"], **resolved["env_kwargs"]).n_vessels
+        resolved["env_kwargs"] = {**resolved["env_kwargs"], "observation_slots": max([base, *sizes]) - 1}
+    try:
+        reference = make_config(resolved["scenario"], **resolved["env_kwargs"])
+    except ConfigError as err:
+        raise TrainConfigError(f"env_kwargs: {err}") from None
+    layout = (reference.observation_slots, reference.action_level)
     for k, kw in enumerate(team_overrides(resolved)):
         try:
             cfg = make_config(resolved["scenario"], **kw)
         except ConfigError as err:
             raise TrainConfigError(f"teams[{k}]: {err}") from None
-        dims.add((cfg.observation_slots, cfg.action_level))
-    if len(dims) > 1:
-        raise TrainConfigError(f"teams must share observation_slots and action_level, got {sorted(dims)}")
+        if (cfg.observation_slots, cfg.action_level) != layout:
+            raise TrainConfigError(
+                f"teams[{k}] has observation_slots = {cfg.observation_slots} and action_level "
+                f"{cfg.action_level!r}, env_kwargs (the scenario of evaluations) {layout[0]} and {layout[1]!r}: "
+                "every team needs the same observation length and level"
+            )
 
 
 def apply_overrides(config: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
@@ -297,6 +311,13 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     if extractor is not None and extractor not in EXTRACTORS:
         raise TrainConfigError(
             f"policy_kwargs.features_extractor_class must be one of {list(EXTRACTORS)}, got {extractor!r}"
+        )
+    norm = resolved["normalize"]
+    normalized = norm is True or (isinstance(norm, dict) and norm.get("norm_obs", True))
+    if extractor == "slots" and normalized:
+        raise TrainConfigError(
+            "policy_kwargs.features_extractor_class 'slots' reads the link bits of raw observations: "
+            f"set normalize: {{norm_obs: false}} (got normalize = {norm!r})"
         )
     _check_teams(resolved)
     lr = resolved.get("learning_rate")

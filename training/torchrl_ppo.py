@@ -57,14 +57,14 @@ discounted return (clipped to ±10). The env's reward, the logged
 
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
-``lr · (1 − max(elapsed / minutes, frames / total_frames))``, as SB3's linear
+``lr · (1 − max(seconds / (60 · minutes), frames / total_frames))``, as SB3's linear
 schedule over ``progress_remaining``, with wall time counted because the
 benchmarks give a run minutes, not frames. ``target_kl`` is SB3's early
-stopping: the magnitude of the minibatch's mean of TorchRL's ``kl_approx``
-diagnostic (log π_old − log π_new, an estimator that can come out below 0 on
-one minibatch) is compared with 1.5 × ``target_kl`` after each
-minibatch update, and the iteration's remaining epochs are skipped once it is
-above. Both are there because the constant-rate policy gets worse after about
+stopping: before each minibatch's step, the magnitude of its mean of
+TorchRL's ``kl_approx`` diagnostic (log π_old − log π_new, an estimator that
+can come out below 0 on one minibatch, unlike SB3's) is compared with 1.5 ×
+``target_kl``; once it is above, that minibatch and the iteration's
+remaining epochs are skipped. Both are there because the constant-rate policy gets worse after about
 20 M vessel-steps (docs/results.md, "Over training seeds").
 
 The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
@@ -585,8 +585,9 @@ def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
 def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:
     """The PPO epochs on one batch; returns the last minibatch's approximate KL and the number of updates.
 
-    With ``target_kl`` set, the epochs stop after the first minibatch whose ``|mean kl_approx|`` exceeds
-    1.5 × ``target_kl`` (SB3's rule).
+    With ``target_kl`` set, the epochs stop at the first minibatch whose ``|mean kl_approx|`` (between the
+    policy that collected the batch and the current one, before this minibatch's step) exceeds 1.5 ×
+    ``target_kl``, without stepping on it (SB3's rule).
     """
     import torch
 
@@ -595,16 +596,16 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tupl
     for _ in range(cfg["epochs"]):
         for _ in range(cfg["frames_per_batch"] // cfg["minibatch_size"]):
             values = loss(buffer.sample())
+            if "kl_approx" in values.keys():
+                kl = abs(float(values["kl_approx"].detach().mean()))
+            if limit is not None and kl > limit:  # as SB3: this minibatch is not stepped on
+                return kl, updates
             total = values["loss_objective"] + values["loss_critic"] + values["loss_entropy"]
             optim.zero_grad()
             total.backward()
             torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
             optim.step()
             updates += 1
-            if "kl_approx" in values.keys():
-                kl = abs(float(values["kl_approx"].detach().mean()))
-            if limit is not None and kl > limit:
-                return kl, updates
     return kl, updates
 
 

@@ -219,6 +219,7 @@ class TeamsVecEnv(VecEnv):
         return [team.get_attr(attr_name, local)[0] for team, local in self._entries(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: VecEnvIndices = None) -> None:
+        """Set the attribute on every team holding one of ``indices`` (a team's entries share one simulation)."""
         for team in {id(t): t for t, _ in self._entries(indices)}.values():
             team.set_attr(attr_name, value)
 
