@@ -436,26 +436,11 @@ def export_run(
 
 def _measure(run: Path, episodes: int) -> dict[str, Any]:
     """The run's policy and the reference on ``episodes`` seeds (10 000 +) of its scenario, as ``evaluate_run``."""
-    from baselines.engine import episode_reports
-    from baselines.reference import ReferencePolicy
-    from marine_formation_env.env import parallel_env
-    from training.learned import load_learned_policy
+    from training.learned import evaluation_summary, load_learned_policy
 
     policy, config = load_learned_policy(run)
-    env = parallel_env(config["scenario"], **config["env_kwargs"])
     seeds = [10_000 + k for k in range(episodes)]
-    learned, _ = episode_reports(policy, env.config, seeds)
-    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
-    return {
-        "seeds": seeds,
-        "learned_return": float(np.mean([m["return"] for m in learned])),
-        "learned_returns": [m["return"] for m in learned],
-        "learned_success": float(np.mean([m["success"] for m in learned])),
-        "reference_return": float(np.mean([m["return"] for m in reference])),
-        "reference_success": float(np.mean([m["success"] for m in reference])),
-        "learned_action_change": float(np.mean([m["action_change"] for m in learned])),
-        "reference_action_change": float(np.mean([m["action_change"] for m in reference])),
-    }
+    return {"seeds": seeds, **evaluation_summary(policy, config["scenario"], config["env_kwargs"], seeds)}
 
 
 # ----------------------------------------------------------------------------- command line

@@ -22,7 +22,15 @@ from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from training.config import algo_class
 
-__all__ = ["UNREADABLE", "ModelPolicy", "UnreadableRunError", "evaluate_run", "load_learned_policy", "run_folder_of"]
+__all__ = [
+    "UNREADABLE",
+    "ModelPolicy",
+    "UnreadableRunError",
+    "evaluate_run",
+    "evaluation_summary",
+    "load_learned_policy",
+    "run_folder_of",
+]
 
 
 class ModelPolicy(BatchPolicy):
@@ -142,20 +150,31 @@ def evaluate_run(
     """
     import json
 
-    from baselines.engine import episode_reports
-    from baselines.reference import ReferencePolicy
     from marine_formation_env.atomic import atomic_write_text
-    from marine_formation_env.env import parallel_env
 
-    env = parallel_env(cfg["scenario"], **cfg["env_kwargs"])
     seeds = [10_000 + k for k in range(cfg["eval_episodes"])]
-    learned, _ = episode_reports(policy, env.config, seeds)
-    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
     summary = {
         "seeds": seeds,
         "frames": frames,
         "vessel_steps": vessel_steps,
         "seconds": seconds,
+        **evaluation_summary(policy, cfg["scenario"], cfg["env_kwargs"], seeds),
+    }
+    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, Any]:
+    """``policy`` and the reference on ``seeds`` of the scenario (engine of ``baselines.evaluate``): mean return and
+    success of each, the per-episode returns and the mean action change per step."""
+    from baselines.engine import episode_reports
+    from baselines.reference import ReferencePolicy
+    from marine_formation_env.env import parallel_env
+
+    env = parallel_env(scenario, **env_kwargs)
+    learned, _ = episode_reports(policy, env.config, seeds)
+    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
+    return {
         "learned_return": float(np.mean([m["return"] for m in learned])),
         "reference_return": float(np.mean([m["return"] for m in reference])),
         "learned_success": float(np.mean([m["success"] for m in learned])),
@@ -165,8 +184,6 @@ def evaluate_run(
         "learned_action_change": float(np.mean([m["action_change"] for m in learned])),
         "reference_action_change": float(np.mean([m["action_change"] for m in reference])),
     }
-    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
-    return summary
 
 
 class UnreadableRunError(ValueError):
