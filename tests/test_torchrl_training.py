@@ -117,8 +117,11 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
     data = json.loads(report.read_text())
     assert set(data["policies"]) == {"reference", str(out)}
     learned = json.loads((out / "evaluation.json").read_text())
-    # the evaluation at the end of training used the same seeds (10 000, 10 001) and the same engine
-    assert data["policies"][str(out)]["summary"]["return"]["mean"] == pytest.approx(learned["learned_return"], rel=1e-9)
+    # the evaluation at the end of training used the same seeds (10 000, 10 001) and the same engine; the two
+    # processes run the float32 network with different torch thread counts (training sets 1), so its sums may
+    # round in another order: 1e-9 relative was seen on one machine, while another policy or seed moves the
+    # return by percents
+    assert data["policies"][str(out)]["summary"]["return"]["mean"] == pytest.approx(learned["learned_return"], rel=1e-6)
 
 
 @pytest.mark.parametrize(
