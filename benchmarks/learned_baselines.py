@@ -16,7 +16,7 @@ a lossy channel, the controller that extrapolates stale messages)::
 row                    budget   config (``training/configs/``)
 =====================  =======  =====================================================
 ``paper_speed``        15 min   ``torchrl/paper_speed_mappo.yaml`` (TorchRL MAPPO)
-``paper_guidance``     30 min   ``paper_guidance_ppo.yaml`` (SB3 PPO)
+``paper_guidance``     30 min   ``torchrl/paper_guidance_mappo.yaml`` (TorchRL MAPPO)
 ``paper_force``        60 min   ``paper_force_ppo.yaml`` (SB3 PPO)
 ``acoustic_speed``     30 min   ``acoustic_speed_ppo.yaml`` (SB3 PPO)
 ``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO)
@@ -51,11 +51,16 @@ policy of the first seed beside the reference). A run whose folder already
 holds its evaluation (``result.json``) is not trained again, so an
 interrupted regeneration continues where it stopped; ``--fresh`` retrains.
 
-``--publish`` (full budgets only) also writes the table with the commit and
-the machine into ``docs/results.md`` (between the ``learned-baselines``
-markers), the figures into ``docs/``, and each row's policy of the first
-seed (not the best: the rule is fixed before the results are seen) into
-``baselines/pretrained/ROW.npz``.
+``--publish`` (full budgets only) also writes the rows' lines of the table,
+each with the commit, the machine and the command, into ``docs/results.md``
+(between the ``learned-baselines`` markers; rows published before and not
+run this time stay as they were, so the table can be regenerated one row at
+a time, ``--rows paper_guidance --publish``), each row's learning curves
+into ``docs/learning_curves/ROW.png`` and its episode into
+``docs/episodes/ROW.png``, and each row's policy of the first seed (not the
+best: the rule is fixed before the results are seen) into
+``baselines/pretrained/ROW.npz``, described by its setting, learner, budget
+and seed.
 """
 
 from __future__ import annotations
@@ -114,7 +119,7 @@ ROWS: dict[str, Row] = {
     row.name: row
     for row in (
         Row("paper_speed", 15.0, "torchrl/paper_speed_mappo.yaml"),
-        Row("paper_guidance", 30.0, "paper_guidance_ppo.yaml"),
+        Row("paper_guidance", 30.0, "torchrl/paper_guidance_mappo.yaml"),
         Row("paper_force", 60.0, "paper_force_ppo.yaml"),
         Row("acoustic_speed", 30.0, "acoustic_speed_ppo.yaml"),
         Row("acoustic_guidance", 30.0, "acoustic_guidance_ppo.yaml"),
@@ -438,21 +443,58 @@ def _commit() -> str:
     return done.stdout.strip() or "unknown"
 
 
-def publish_markdown(table: str, command: str, document: Path) -> None:
-    """Replace the text between the ``learned-baselines`` markers of ``document`` (append them if missing)."""
+def _split_table(lines: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]:
+    """The header lines of a ``format_table`` table and, per row name, its line and its sub-rows' lines."""
+    header: list[str] = []
+    rows: dict[str, list[str]] = {}
+    current = None
+    for line in lines:
+        if line.startswith("| `"):
+            current = line.split("`", 2)[1]
+            rows[current] = [line]
+        elif line.startswith("| ↳") and current is not None:
+            rows[current].append(line)
+        elif line.startswith("|"):
+            header.append(line)
+    return header, rows
+
+
+def publish_markdown(table: str, provenance: str, document: Path) -> None:
+    """Put the rows of ``table`` between the ``learned-baselines`` markers of ``document`` (appended if missing).
+
+    Each row published gets ``provenance`` (the commit, the machine, the command) as its line under the
+    table and its learning curves figure (``learning_curves/ROW.png``, beside the document) below. Rows
+    already in the document and not in ``table`` stay as they were, with their own provenance: the table can
+    be regenerated one row at a time. Rows are in the order of :data:`ROWS`.
+    """
     text = document.read_text() if document.is_file() else ""
-    block = (
-        f"{MARKERS[0]}\n"
-        f"Measured on commit {_commit()}, {_machine()}, with `{command}`.\n\n{table}\n"
-        f"\n![Learning curves](learning_curves.png)\n{MARKERS[1]}"
-    )
+    old: list[str] = []
     if MARKERS[0] in text and MARKERS[1] in text:
         head, rest = text.split(MARKERS[0], 1)
-        _, tail = rest.split(MARKERS[1], 1)
-        text = head + block + tail
+        old, tail = rest.split(MARKERS[1], 1)[0].splitlines(), rest.split(MARKERS[1], 1)[1]
     else:
-        text = text.rstrip("\n") + "\n\n" + block + "\n"
-    atomic_write_text(document, text)
+        head, tail = text.rstrip("\n") + "\n\n", "\n"
+    _, rows = _split_table(old)
+    sources = {line.split("`", 2)[1]: line.split("`: ", 1)[1] for line in old if line.startswith("- `")}
+    header, new_rows = _split_table(table.splitlines())
+    rows.update(new_rows)
+    sources.update({name: provenance for name in new_rows})
+    order = sorted(rows, key=lambda name: list(ROWS).index(name) if name in ROWS else len(ROWS))
+    lines = [MARKERS[0], *header, *(line for name in order for line in rows[name]), ""]
+    lines += [f"- `{name}`: {sources[name]}" for name in order if name in sources]
+    lines.append("")
+    for name in order:
+        lines += [f"![{name}: learning curves](learning_curves/{name}.png)", ""]
+    atomic_write_text(document, head + "\n".join(lines) + MARKERS[1] + tail)
+
+
+def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
+    """A pretrained policy's one-line description: its setting, how it was trained, which seed."""
+    scenario, env_kwargs = _scenario_of(folder)
+    learner = "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO"
+    level = env_kwargs.get("action_level", "speed")
+    text = f"{scenario} scenario, {level} level: {learner}, {record['minutes']:g} min, training seed {record['seed']}"
+    return f"{text} ({row.note})" if row.note else text
 
 
 # ----------------------------------------------------------------------------- command line
@@ -516,17 +558,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         from baselines.pretrained import export_run
 
         docs = ROOT / "docs"
-        publish_markdown(table, report["command"], docs / "results.md")
-        plot_learning_curves(rows, records, args.out, docs / "learning_curves.png")
+        provenance = f"measured on commit {_commit()}, {_machine()}, with `{report['command']}`"
+        publish_markdown(table, provenance, docs / "results.md")
         for row in rows:
             first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
             if first is None:
                 continue
+            plot_learning_curves([row], records, args.out, docs / "learning_curves" / f"{row.name}.png")
             plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
             training = {"minutes": first["minutes"], "config": row.config, "commit": _commit()}
             folder = args.out / row.name / f"seed_{first['seed']}"
             header = _header_evaluation(row, first, folder, args.episodes)
-            export_run(folder, row.name, row.note or row.name, training=training, evaluation=header)
+            export_run(folder, row.name, _description(row, folder, first), training=training, evaluation=header)
     return 0
 
 

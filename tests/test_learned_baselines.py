@@ -58,17 +58,29 @@ def test_a_lossy_channel_row_is_measured_against_the_extrapolating_reference():
     assert "-125.0, 100%" in table and table.endswith("| met, smooth |")
 
 
-def test_publishing_replaces_only_the_text_between_the_markers(tmp_path):
+def test_publishing_replaces_only_the_rows_it_ran_and_keeps_the_others_with_their_provenance(tmp_path):
+    header = "| row | minutes |\n|---|---|"
     document = tmp_path / "results.md"
-    document.write_text(f"# Results\n\nbefore\n\n{lb.MARKERS[0]}\nold table\n{lb.MARKERS[1]}\n\nafter\n")
-    lb.publish_markdown("| new | table |", "python -m benchmarks.learned_baselines --publish", document)
+    old = f"{header}\n| `survey_speed` | 30 |\n| `paper_speed` | 15 |\n\n- `survey_speed`: by hand\n- `paper_speed`: old"
+    document.write_text(f"# Results\n\nbefore\n\n{lb.MARKERS[0]}\n{old}\n{lb.MARKERS[1]}\n\nafter\n")
+    new = f"{header}\n| `any_n_speed` | 31 |\n| ↳ n = 8, `ring` | |\n| `paper_speed` | 16 |"
+    lb.publish_markdown(new, "measured on commit abc", document)
     text = document.read_text()
     assert text.startswith("# Results\n\nbefore\n\n") and text.endswith("\n\nafter\n")
-    assert "old table" not in text and "| new | table |" in text and "Measured on commit" in text
+    block = text.split(lb.MARKERS[0])[1].split(lb.MARKERS[1])[0]
+    rows = [line for line in block.splitlines() if line.startswith("| `") or line.startswith("| ↳")]
+    # the order of ROWS, not of the document or the call; a generalization row keeps its sub-rows under it
+    assert rows == ["| `paper_speed` | 16 |", "| `survey_speed` | 30 |", "| `any_n_speed` | 31 |",
+                    "| ↳ n = 8, `ring` | |"]  # fmt: skip
+    assert block.count(header) == 1 and "| `paper_speed` | 15 |" not in block
+    sources = [line for line in block.splitlines() if line.startswith("- `")]
+    assert sources == ["- `paper_speed`: measured on commit abc", "- `survey_speed`: by hand",
+                       "- `any_n_speed`: measured on commit abc"]  # fmt: skip
+    assert "![any_n_speed: learning curves](learning_curves/any_n_speed.png)" in block
     fresh = tmp_path / "empty.md"
     fresh.write_text("# Results\n")
-    lb.publish_markdown("| t |", "cmd", fresh)
-    assert fresh.read_text().count(lb.MARKERS[0]) == 1
+    lb.publish_markdown(new, "cmd", fresh)
+    assert fresh.read_text().startswith("# Results\n\n") and fresh.read_text().count(lb.MARKERS[0]) == 1
 
 
 def test_a_run_with_a_result_is_not_trained_again(tmp_path, monkeypatch):
@@ -165,11 +177,12 @@ def test_publishing_writes_the_table_the_figures_and_loadable_pretrained_policie
     text = (tmp_path / "docs" / "results.md").read_text()
     assert lb.MARKERS[0] in text and "| `paper_speed` | torchrl | 0.1 | 1 |" in text
     assert "| ↳ n = 20, `random` |" in text
-    assert (tmp_path / "docs" / "learning_curves.png").is_file()
+    assert (tmp_path / "docs" / "learning_curves" / "any_n_speed.png").is_file()
     assert (tmp_path / "docs" / "episodes" / "any_n_speed.png").is_file()
     for name in rows:
         _, info = pretrained.load_pretrained(name)
         assert info.training["minutes"] == 0.1 and len(info.evaluation["learned_returns"]) == 1
+        assert "training seed 0" in info.description and "0.1 min" in info.description
     assert pretrained.load_pretrained("any_n_speed")[1].kind == "slots"
     assert set(pretrained.load_pretrained("any_n_speed")[1].evaluation["settings"]) == {
         f"n{n}_{t}" for n in (8, 12, 20) for t in ("ring", "chain", "random")
