@@ -187,24 +187,14 @@ def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict
 
 
 def _evaluate_members(policy: Any, env: Any, episodes: int) -> dict[str, Any]:
-    from baselines.engine import episode_reports
     from baselines.reference import ReferencePolicy
+    from training.learned import member_metrics
 
     seeds = [EVAL_SEED + k for k in range(episodes)]
     policies: dict[str, Any] = {"learned": policy, "reference": ReferencePolicy(env)}
     if not env.config.ideal_observations:
         policies["reference_extrapolate"] = ReferencePolicy(env, extrapolate=True)
-    out: dict[str, Any] = {"seeds": seeds}
-    for name, member in policies.items():
-        metrics, _ = episode_reports(member, env.config, seeds)
-        out[name] = {
-            "return": float(np.mean([m["return"] for m in metrics])),
-            "returns": [m["return"] for m in metrics],
-            "success": float(np.mean([m["success"] for m in metrics])),
-            "action_change": float(np.mean([m["action_change"] for m in metrics])),
-            "final_spread": float(np.mean([m["final_coordination_spread"] for m in metrics])),
-        }
-    return out
+    return {"seeds": seeds, **member_metrics(policies, env.config, seeds)}
 
 
 def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, fresh: bool) -> dict[str, Any]:

@@ -61,7 +61,7 @@ def test_a_lossy_channel_row_is_measured_against_the_extrapolating_reference():
 def test_publishing_replaces_only_the_rows_it_ran_and_keeps_the_others_with_their_provenance(tmp_path):
     header = "| row | minutes |\n|---|---|"
     document = tmp_path / "results.md"
-    old = f"{header}\n| `survey_speed` | 30 |\n| `paper_speed` | 15 |\n\n- `survey_speed`: by hand\n- `paper_speed`: old"
+    old = f"{header}\n| `survey_speed` | 30 |\n| `paper_speed` | 15 |\n\n- `survey_speed`: by hand\n- `paper_speed`: x"
     document.write_text(f"# Results\n\nbefore\n\n{lb.MARKERS[0]}\n{old}\n{lb.MARKERS[1]}\n\nafter\n")
     new = f"{header}\n| `any_n_speed` | 31 |\n| ↳ n = 8, `ring` | |\n| `paper_speed` | 16 |"
     lb.publish_markdown(new, "measured on commit abc", document)
@@ -187,3 +187,24 @@ def test_publishing_writes_the_table_the_figures_and_loadable_pretrained_policie
     assert set(pretrained.load_pretrained("any_n_speed")[1].evaluation["settings"]) == {
         f"n{n}_{t}" for n in (8, 12, 20) for t in ("ring", "chain", "random")
     }
+
+
+def test_member_metrics_measures_each_policy_on_the_same_seeds():
+    from baselines.reference import ReferencePolicy
+    from baselines.rollout import BatchPolicy
+    from marine_formation_env.env import parallel_env
+    from training.learned import member_metrics
+
+    class Constant(BatchPolicy):
+        def act_batch(self, obs):
+            return np.full((*obs.shape[:-1], 1), 0.3)
+
+    env = parallel_env("paper", action_level="speed")
+    out = member_metrics({"reference": ReferencePolicy(env), "constant": Constant()}, env.config, [10_000, 10_001])
+    reference, constant = out["reference"], out["constant"]
+    assert len(reference["returns"]) == 2 and reference["return"] == pytest.approx(np.mean(reference["returns"]))
+    # the paper's controller settles the formation (its claim): every episode in the success band (spread ≤ 1 m)
+    assert reference["success"] == 1.0 and reference["final_spread"] <= 1.0
+    # one speed for every vessel never closes the initial along-path gaps (tens of metres), and never changes
+    assert constant["success"] == 0.0 and constant["final_spread"] > 5.0
+    assert constant["action_change"] == 0.0 and reference["action_change"] > 0.0

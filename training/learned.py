@@ -29,6 +29,7 @@ __all__ = [
     "evaluate_run",
     "evaluation_summary",
     "load_learned_policy",
+    "member_metrics",
     "run_folder_of",
 ]
 
@@ -164,26 +165,36 @@ def evaluate_run(
     return summary
 
 
-def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, Any]:
-    """``policy`` and the reference on ``seeds`` of the scenario (engine of ``baselines.evaluate``): mean return and
-    success of each, the per-episode returns and the mean action change per step."""
+def member_metrics(policies: dict[str, Any], config: Any, seeds: list[int]) -> dict[str, dict[str, Any]]:
+    """Each of ``policies`` on ``seeds`` of one env config (engine of ``baselines.evaluate``).
+
+    Per policy: the mean ``return`` and the per-episode ``returns``, the ``success`` rate, the mean
+    ``action_change`` per step and the mean ``final_spread`` (the coordination spread at the end).
+    """
     from baselines.engine import episode_reports
+
+    out: dict[str, dict[str, Any]] = {}
+    for name, policy in policies.items():
+        metrics, _ = episode_reports(policy, config, seeds)
+        out[name] = {
+            "return": float(np.mean([m["return"] for m in metrics])),
+            "returns": [m["return"] for m in metrics],
+            "success": float(np.mean([m["success"] for m in metrics])),
+            "action_change": float(np.mean([m["action_change"] for m in metrics])),
+            "final_spread": float(np.mean([m["final_coordination_spread"] for m in metrics])),
+        }
+    return out
+
+
+def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, Any]:
+    """``policy`` and the reference on ``seeds`` of the scenario (:func:`member_metrics`), flat: the mean return
+    and success of each, the per-episode returns and the mean action change per step."""
     from baselines.reference import ReferencePolicy
     from marine_formation_env.env import parallel_env
 
     env = parallel_env(scenario, **env_kwargs)
-    learned, _ = episode_reports(policy, env.config, seeds)
-    reference, _ = episode_reports(ReferencePolicy(env), env.config, seeds)
-    return {
-        "learned_return": float(np.mean([m["return"] for m in learned])),
-        "reference_return": float(np.mean([m["return"] for m in reference])),
-        "learned_success": float(np.mean([m["success"] for m in learned])),
-        "reference_success": float(np.mean([m["success"] for m in reference])),
-        "learned_returns": [m["return"] for m in learned],
-        "reference_returns": [m["return"] for m in reference],
-        "learned_action_change": float(np.mean([m["action_change"] for m in learned])),
-        "reference_action_change": float(np.mean([m["action_change"] for m in reference])),
-    }
+    members = member_metrics({"learned": policy, "reference": ReferencePolicy(env)}, env.config, seeds)
+    return {f"{m}_{key}": members[m][key] for m in members for key in ("return", "success", "returns", "action_change")}
 
 
 class UnreadableRunError(ValueError):
