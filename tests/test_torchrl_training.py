@@ -24,6 +24,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E4
 
 import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
+from marine_formation_env.scenarios import make_config  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
@@ -222,6 +223,7 @@ def test_an_unreadable_policy_file_is_named(tmp_path):
 def test_shipped_torchrl_configs_resolve(path):
     cfg = resolve(load_config(path), seed=0)
     assert cfg["frames_per_batch"] % cfg["num_envs"] == 0
+    make_config(cfg["scenario"], **cfg["env_kwargs"])  # the scenario and every override exist
 
 
 def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_was_updated_with():
