@@ -371,7 +371,8 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
         ax.legend(fontsize=7, loc="lower right")
     for ax in axes[len(rows) :]:
         ax.set_visible(False)
-    fig.suptitle("Training episodes' return (stochastic policy) against the reference's evaluation return")
+    title = "Training episodes' return (stochastic policy) against the reference's evaluation return"
+    fig.suptitle(title if cols > 1 else title.replace(" against", "\nagainst"), fontsize=10 if cols > 1 else 9)
     fig.tight_layout()
     _save_figure(fig, path)
 
