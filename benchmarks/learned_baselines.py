@@ -87,6 +87,8 @@ __all__ = ["ROWS", "Row", "format_table", "main", "row_summary", "run_row_seed"]
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "training" / "configs"
+#: Where ``--publish`` writes results.md and the figures.
+DOCS = ROOT / "docs"
 MARKERS = ("<!-- learned-baselines:start -->", "<!-- learned-baselines:end -->")
 #: First evaluation seed (as ``training.learned.evaluate_run``).
 EVAL_SEED = 10_000
@@ -462,7 +464,8 @@ def publish_markdown(table: str, provenance: str, document: Path) -> None:
     old: list[str] = []
     if MARKERS[0] in text and MARKERS[1] in text:
         head, rest = text.split(MARKERS[0], 1)
-        old, tail = rest.split(MARKERS[1], 1)[0].splitlines(), rest.split(MARKERS[1], 1)[1]
+        inside, tail = rest.split(MARKERS[1], 1)
+        old = inside.splitlines()
     else:
         head, tail = text.rstrip("\n") + "\n\n", "\n"
     _, rows = _split_table(old)
@@ -481,9 +484,11 @@ def publish_markdown(table: str, provenance: str, document: Path) -> None:
 
 def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     """A pretrained policy's one-line description: its setting, how it was trained, which seed."""
+    from marine_formation_env.scenarios import make_config
+
     scenario, env_kwargs = _scenario_of(folder)
     learner = "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO"
-    level = env_kwargs.get("action_level", "speed")
+    level = make_config(scenario, **env_kwargs).action_level  # the scenario's own level when the run set none
     text = f"{scenario} scenario, {level} level: {learner}, {record['minutes']:g} min, training seed {record['seed']}"
     return f"{text} ({row.note})" if row.note else text
 
@@ -548,8 +553,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.publish:
         from baselines.pretrained import export_run
 
-        docs = ROOT / "docs"
-        provenance = f"measured on commit {_commit()}, {_machine()}, with `{report['command']}`"
+        docs = DOCS
+        commit = _commit()
+        provenance = f"measured on commit {commit}, {_machine()}, with `{report['command']}`"
         publish_markdown(table, provenance, docs / "results.md")
         for row in rows:
             first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
@@ -557,7 +563,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             plot_learning_curves([row], records, args.out, docs / "learning_curves" / f"{row.name}.png")
             plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
-            training = {"minutes": first["minutes"], "config": row.config, "commit": _commit()}
+            training = {"minutes": first["minutes"], "config": row.config, "commit": commit}
             folder = args.out / row.name / f"seed_{first['seed']}"
             header = _header_evaluation(row, first, folder, args.episodes)
             export_run(folder, row.name, _description(row, folder, first), training=training, evaluation=header)
