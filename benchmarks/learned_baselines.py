@@ -60,7 +60,8 @@ into ``docs/learning_curves/ROW.png`` and its episode into
 ``docs/episodes/ROW.png``, and each row's policy of the first seed (not the
 best: the rule is fixed before the results are seen) into
 ``baselines/pretrained/ROW.npz``, described by its setting, learner, budget
-and seed.
+and seed; its header's training commit is the one the run trained with
+(``result.json`` keeps it), which can be older than the publishing commit.
 """
 
 from __future__ import annotations
@@ -210,6 +211,7 @@ def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, 
     if folder.exists():  # an earlier, unfinished or other-budget run of this row and seed: start clean
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
+    commit = _commit()  # the code it trains with: a later --publish may run on a later commit
     begin = time.perf_counter()
     done = subprocess.run(_train_command(row, seed, minutes, folder), cwd=ROOT, capture_output=True, text=True)
     atomic_write_text(folder / "train.log", done.stdout + "\n--- stderr ---\n" + done.stderr)
@@ -220,6 +222,7 @@ def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, 
         "seed": seed,
         "pipeline": row.pipeline,
         "config": row.config,
+        "commit": commit,
         "minutes": minutes,
         "episodes": episodes,
         "wall_seconds": round(time.perf_counter() - begin, 1),
@@ -563,7 +566,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             plot_learning_curves([row], records, args.out, docs / "learning_curves" / f"{row.name}.png")
             plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
-            training = {"minutes": first["minutes"], "config": row.config, "commit": commit}
+            # the commit the policy trained with (a run found done may be older than this publish)
+            training = {"minutes": first["minutes"], "config": row.config, "commit": first.get("commit", commit)}
             folder = args.out / row.name / f"seed_{first['seed']}"
             header = _header_evaluation(row, first, folder, args.episodes)
             export_run(folder, row.name, _description(row, folder, first), training=training, evaluation=header)

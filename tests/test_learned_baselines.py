@@ -9,6 +9,7 @@ trained again. A real smoke run (training and evaluation) is marked slow.
 from __future__ import annotations
 
 import json
+import subprocess
 
 import numpy as np
 import pytest
@@ -179,9 +180,13 @@ def test_publishing_writes_the_table_the_figures_and_loadable_pretrained_policie
     assert "| ↳ n = 20, `random` |" in text
     assert (tmp_path / "docs" / "learning_curves" / "any_n_speed.png").is_file()
     assert (tmp_path / "docs" / "episodes" / "any_n_speed.png").is_file()
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=lb.ROOT, capture_output=True, text=True)
     for name in rows:
         _, info = pretrained.load_pretrained(name)
         assert info.training["minutes"] == 0.1 and len(info.evaluation["learned_returns"]) == 1
+        # the commit its run trained with, kept by the run's result.json for a later publish
+        trained = json.loads((tmp_path / "out" / name / "seed_0" / "result.json").read_text())["commit"]
+        assert info.training["commit"] == trained == (head.stdout.strip() or "unknown")
         assert "training seed 0" in info.description and "0.1 min" in info.description
     assert pretrained.load_pretrained("any_n_speed")[1].kind == "slots"
     assert set(pretrained.load_pretrained("any_n_speed")[1].evaluation["settings"]) == {
