@@ -61,7 +61,8 @@ into ``docs/learning_curves/ROW.png`` and its episode into
 best: the rule is fixed before the results are seen) into
 ``baselines/pretrained/ROW.npz``, described by its setting, learner, budget
 and seed; its header's training commit is the one the run trained with
-(``result.json`` keeps it), which can be older than the publishing commit.
+(``result.json`` keeps it; ``unknown`` for a result written before it did),
+which can be older than the publishing commit.
 """
 
 from __future__ import annotations
@@ -566,8 +567,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 continue
             plot_learning_curves([row], records, args.out, docs / "learning_curves" / f"{row.name}.png")
             plot_episode(row, first, args.out, docs / "episodes" / f"{row.name}.png")
-            # the commit the policy trained with (a run found done may be older than this publish)
-            training = {"minutes": first["minutes"], "config": row.config, "commit": first.get("commit", commit)}
+            # the commit the policy trained with (a run found done may be older than this publish; a result.json
+            # written before runs recorded it does not say, and this publish's commit would be a guess)
+            training = {"minutes": first["minutes"], "config": row.config, "commit": first.get("commit", "unknown")}
             folder = args.out / row.name / f"seed_{first['seed']}"
             header = _header_evaluation(row, first, folder, args.episodes)
             export_run(folder, row.name, _description(row, folder, first), training=training, evaluation=header)
