@@ -34,6 +34,7 @@ nest; unknown keys and bad values are refused by name):
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
+| ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
 
@@ -54,6 +55,15 @@ advantages of each minibatch; ``normalize_reward`` divides the rewards the
 critic and the advantages see by the running standard deviation of the
 discounted return (clipped to ±10). The env's reward, the logged
 ``mean_reward`` and the evaluation are unchanged.
+
+``train_reward`` shapes the reward the learner trains on, nothing else: the
+training env's reward is the scenario's with these fields replaced (for
+example ``{sigma_cross_track: 5.0, sigma_coordination: 5.0}``, so that an
+error of a metre costs more than the benchmark's 20 m scales make it cost),
+while ``env_kwargs``, the closing evaluation, ``baselines.evaluate`` and the
+learned baselines keep the benchmark's reward. ``progress.csv``'s
+``mean_reward`` and ``episode_return`` are then in the shaped reward, not
+comparable with the reference's return.
 
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
@@ -118,6 +128,7 @@ __all__ = [
     "resolve",
     "running_norm",
     "train",
+    "training_env_kwargs",
 ]
 
 #: Every key a config may hold, with its default.
@@ -144,6 +155,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
+    "train_reward": {},
     "eval_episodes": 4,
     "threads": 1,
 }
@@ -199,7 +211,40 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         make_config(cfg["scenario"], **cfg["env_kwargs"])
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
+    _check_train_reward(cfg)
     return cfg
+
+
+def training_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The env overrides the learner trains on: ``env_kwargs`` with ``train_reward``'s fields in its reward."""
+    if not cfg["train_reward"]:
+        return dict(cfg["env_kwargs"])
+    return {**cfg["env_kwargs"], "reward": {**cfg["env_kwargs"].get("reward", {}), **cfg["train_reward"]}}
+
+
+def _check_train_reward(cfg: dict[str, Any]) -> None:
+    import dataclasses
+
+    from marine_formation_env.scenarios import make_config
+    from marine_formation_env.settings import RewardConfig
+
+    shaped = cfg["train_reward"]
+    if not isinstance(shaped, dict):
+        raise TrainConfigError(f"train_reward must be a mapping of reward fields, got {shaped!r}")
+    if not shaped:
+        return
+    fields = {f.name for f in dataclasses.fields(RewardConfig)}
+    unknown = sorted(set(shaped) - fields)
+    if unknown:
+        raise TrainConfigError(f"train_reward: unknown field(s) {unknown}; valid fields: {sorted(fields)}")
+    if not isinstance(cfg["env_kwargs"].get("reward", {}), dict):
+        raise TrainConfigError(
+            f"train_reward needs env_kwargs.reward to be a mapping, got {cfg['env_kwargs']['reward']!r}"
+        )
+    try:
+        make_config(cfg["scenario"], **training_env_kwargs(cfg))
+    except (ValueError, TypeError) as err:
+        raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
 
 # ----------------------------------------------------------------------------- networks
@@ -473,7 +518,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         torch.set_num_threads(cfg["threads"])
     seed = cfg["seed"]
     torch.manual_seed(seed)
-    env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **cfg["env_kwargs"])
+    # the learner's env: the scenario with train_reward's shaping (none by default); the evaluation uses env_kwargs
+    env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **training_env_kwargs(cfg))
     env.set_seed(seed)
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
     normalize = cfg["normalize_observations"]
