@@ -158,6 +158,16 @@ def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
     return config["scenario"], dict(config["env_kwargs"])
 
 
+def _shaping(folder: Path) -> dict[str, Any]:
+    """The run's ``train_reward`` (TorchRL's reward shaping; ``{}`` for none or another pipeline)."""
+    import yaml
+
+    path = folder / "config.yaml"
+    if not path.is_file():
+        return {}
+    return dict((yaml.safe_load(path.read_text()) or {}).get("train_reward") or {})
+
+
 def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:
     """The run's policy, the reference (and the extrapolating reference over a lossy channel) on the same seeds.
 
@@ -345,7 +355,11 @@ def _curve(folder: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Path, path: Path) -> None:
-    """Per row: the mean and the min–max over seeds of the training episodes' return, the reference as a line."""
+    """Per row: the mean and the min–max over seeds of the training episodes' return, the reference as a line.
+
+    A row whose runs trained on a shaped reward (``train_reward``) has no reference line: its curve is in that
+    reward, not the benchmark's.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -356,6 +370,8 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
     axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
     for ax, row in zip(axes, rows, strict=False):
         mine = [r for r in records if r.get("row") == row.name and "learned" in r]
+        # a run trained on a shaped reward logs that reward, which the reference's return does not measure
+        shaped = any(_shaping(out / row.name / f"seed_{r['seed']}") for r in mine)
         curves = [_curve(out / row.name / f"seed_{r['seed']}") for r in mine]
         curves = [(t, y) for t, y in curves if len(t) > 1]
         if curves:
@@ -365,14 +381,14 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
             ys = np.array([np.interp(grid, t, y) for t, y in curves])
             ax.fill_between(grid, ys.min(axis=0), ys.max(axis=0), alpha=0.25, color="C0", lw=0)
             ax.plot(grid, ys.mean(axis=0), color="C0", label=f"learned, mean of {len(curves)} seeds (min–max)")
-        if mine:
+        if mine and not shaped:
             ax.axhline(np.mean([r["reference"]["return"] for r in mine]), color="k", ls="--", label="reference")
             if "reference_extrapolate" in mine[0]:
                 value = np.mean([r["reference_extrapolate"]["return"] for r in mine])
                 ax.axhline(value, color="C2", ls=":", label="extrapolating reference")
-        ax.set_title(row.name)
+        ax.set_title(f"{row.name} (shaped training reward: no reference line)" if shaped else row.name)
         ax.set_xlabel("wall-clock minutes")
-        ax.set_ylabel("episode return")
+        ax.set_ylabel("episode return in the training reward" if shaped else "episode return")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
     for ax in axes[len(rows) :]:
@@ -494,6 +510,9 @@ def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     learner = "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO"
     level = make_config(scenario, **env_kwargs).action_level  # the scenario's own level when the run set none
     text = f"{scenario} scenario, {level} level: {learner}, {record['minutes']:g} min, training seed {record['seed']}"
+    shaping = _shaping(folder)
+    if shaping:
+        text += ", trained on a shaped reward (" + ", ".join(f"{k}={v}" for k, v in shaping.items()) + ")"
     return f"{text} ({row.note})" if row.note else text
 
 

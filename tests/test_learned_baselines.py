@@ -147,6 +147,14 @@ def test_the_any_team_row_is_judged_on_every_team_size_and_graph():
 
 
 @pytest.mark.slow
+def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
+    assert lb._shaping(tmp_path) == {}  # no config.yaml: an SB3 run folder, say
+    (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {}\n")
+    assert lb._shaping(tmp_path) == {}
+    (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {sigma_coordination: 5.0}\n")
+    assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
+
+
 def test_a_smoke_run_trains_evaluates_and_plots(tmp_path):
     out = tmp_path / "out"
     argv = ["--rows", "paper_speed,paper_guidance", "--seeds", "0", "--minutes", "0.1", "--episodes", "1",

@@ -142,6 +142,9 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
+        ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
+        ("train_reward.sigma_x=1", "train_reward: unknown field(s) ['sigma_x']"),
+        ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -151,6 +154,23 @@ def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
+    # every weight 0 and no terminal penalty: the learner's reward is exactly 0 at every step, while the
+    # closing evaluation (and the saved env_kwargs) keep the benchmark's reward, which is < 0 for any policy
+    out = tmp_path / "shaped"
+    args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    for item in [*TINY, *(f"train_reward.{k}=0.0" for k in ("cross_track", "heading", "coordination", "speed"))]:
+        args += ["--set", item]
+    assert main([*args, "--set", "train_reward.terminal_penalty=false"]) == 0
+    rows = (out / "progress.csv").read_text().splitlines()[1:]
+    assert rows and all(float(row.split(",")[3]) == 0.0 for row in rows)  # mean_reward
+    summary = json.loads((out / "evaluation.json").read_text())
+    assert summary["learned_return"] < 0 and summary["reference_return"] < 0
+    _, config = load_torch_policy(out)
+    assert "reward" not in config["env_kwargs"] and config["train_reward"]["coordination"] == 0.0
+    assert trainer.training_env_kwargs(config)["reward"]["speed"] == 0.0
 
 
 def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
