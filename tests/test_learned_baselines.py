@@ -146,7 +146,6 @@ def test_the_any_team_row_is_judged_on_every_team_size_and_graph():
     assert table[4].startswith("| ↳ n = 20, `chain` |") and "| 0.50 |" in table[4]
 
 
-@pytest.mark.slow
 def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {}  # no config.yaml: an SB3 run folder, say
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {}\n")
@@ -155,6 +154,7 @@ def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
 
 
+@pytest.mark.slow
 def test_a_smoke_run_trains_evaluates_and_plots(tmp_path):
     out = tmp_path / "out"
     argv = ["--rows", "paper_speed,paper_guidance", "--seeds", "0", "--minutes", "0.1", "--episodes", "1",
