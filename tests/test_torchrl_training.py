@@ -143,7 +143,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
-        ("train_reward.sigma_x=1", "train_reward: unknown field(s) ['sigma_x']"),
+        ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
         ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
     ],
 )
