@@ -10,7 +10,8 @@ pipeline       what runs
 ``sb3``        SB3 PPO, one shared policy over every vessel (``benchmarks.learning``,
                ``training/configs/paper_speed_ppo.yaml``)
 ``torchrl``    MAPPO with TorchRL on the batched TorchRL env (``training.torchrl_ppo``,
-               ``training/configs/torchrl/paper_speed_mappo.yaml``)
+               ``training/configs/torchrl/paper_speed_mappo.yaml`` without its ``train_reward``:
+               every pipeline learns from the benchmark's reward)
 ``benchmarl``  BenchMARL's MAPPO with its default settings on ``marine_formation/paper_speed``
                (``benchmarks.benchmarl_budget``; ecosystem environment)
 ``rllib``      RLlib PPO, one shared module, 2 env runners (``training.rllib_ppo``,
@@ -80,6 +81,7 @@ def _command(name: str, minutes: float, episodes: int, seed: int, folder: Path, 
     if name == "torchrl":
         return [here, "-m", "training.torchrl_ppo", "--config", str(CONFIGS / "torchrl" / "paper_speed_mappo.yaml"),
                 "--set", f"minutes={minutes}", "--set", "total_frames=1e12", "--set", f"eval_episodes={episodes}",
+                "--set", "train_reward={}",  # the benchmark's reward, as every other pipeline trains on
                 "--seed", str(seed), "--out", str(folder), "--overwrite", "--no-progress"]  # fmt: skip
     if eco is None:
         return None

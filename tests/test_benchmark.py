@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 
 import numpy as np
@@ -119,6 +120,34 @@ def test_training_throughput_summarizes_each_pipeline_over_its_seeds_against_sb3
     slower = summarize([_run("sb3", 0, 100.0, -70.0), _run("torchrl", 0, 499.0, -60.0)])[1]["vs_sb3"]
     worse = summarize([_run("sb3", 0, 100.0, -70.0), _run("torchrl", 0, 900.0, -70.5)])[1]["vs_sb3"]
     assert slower["target_met"] is False and worse["target_met"] is False
+
+
+def test_training_throughput_trains_torchrl_on_the_benchmark_reward_not_the_configs_shaping(tmp_path) -> None:
+    """Every pipeline learns from the same reward: the TorchRL command drops the shipped config's train_reward.
+
+    Truth: the scenario's reward built from the learner's env overrides equals the one the evaluation
+    uses (the ``paper`` preset's), while the shipped config alone would train with other scales.
+    """
+    pytest.importorskip("torch")
+    from benchmarks.training_throughput import _command
+    from marine_formation_env.scenarios import make_config
+    from training.config import add_run_arguments, config_from_arguments
+    from training.torchrl_ppo import resolve, training_env_kwargs
+
+    def learner_reward(argv):
+        parser = argparse.ArgumentParser()
+        add_run_arguments(parser)
+        cfg = config_from_arguments(parser.parse_args(argv), resolve, "test")
+        return make_config(cfg["scenario"], **training_env_kwargs(cfg)).reward, make_config(
+            cfg["scenario"], **cfg["env_kwargs"]
+        ).reward
+
+    command = _command("torchrl", 1.0, 2, 0, tmp_path, None)
+    trained, evaluated = learner_reward(command[command.index("--config") :])
+    assert trained == evaluated
+    shipped = [*command[command.index("--config") : command.index("--config") + 2], "--out", str(tmp_path)]
+    trained, evaluated = learner_reward(shipped)
+    assert trained.sigma_coordination < evaluated.sigma_coordination  # the config's shaping, which the benchmark drops
 
 
 def test_training_throughput_runs_every_seed_and_keeps_each_run_in_the_json(monkeypatch, tmp_path, capsys) -> None:
