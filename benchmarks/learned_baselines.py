@@ -52,7 +52,8 @@ holds its evaluation (``result.json``) is not trained again, so an
 interrupted regeneration continues where it stopped; ``--fresh`` retrains.
 
 ``--publish`` (full budgets only) also writes the rows' lines of the table,
-each with the commit, the machine and the command, into ``docs/results.md``
+each with the commit (and, when its runs trained on another, that one), the
+machine and the command, into ``docs/results.md``
 (between the ``learned-baselines`` markers; rows published before and not
 run this time stay as they were, so the table can be regenerated one row at
 a time, ``--rows paper_guidance --publish``), each row's learning curves
@@ -368,6 +369,7 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
     fig = Figure(figsize=(5.0 * cols, 3.6 * nrows), dpi=100)
     FigureCanvasAgg(fig)
     axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
+    any_reference = False
     for ax, row in zip(axes, rows, strict=False):
         mine = [r for r in records if r.get("row") == row.name and "learned" in r]
         # a run trained on a shaped reward logs that reward, which the reference's return does not measure
@@ -382,19 +384,24 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
             ax.fill_between(grid, ys.min(axis=0), ys.max(axis=0), alpha=0.25, color="C0", lw=0)
             ax.plot(grid, ys.mean(axis=0), color="C0", label=f"learned, mean of {len(curves)} seeds (min–max)")
         if mine and not shaped:
+            any_reference = True
             ax.axhline(np.mean([r["reference"]["return"] for r in mine]), color="k", ls="--", label="reference")
             if "reference_extrapolate" in mine[0]:
                 value = np.mean([r["reference_extrapolate"]["return"] for r in mine])
                 ax.axhline(value, color="C2", ls=":", label="extrapolating reference")
-        ax.set_title(f"{row.name} (shaped training reward: no reference line)" if shaped else row.name)
+        ax.set_title(f"{row.name}\n(shaped training reward: no reference line)" if shaped else row.name, fontsize=10)
         ax.set_xlabel("wall-clock minutes")
         ax.set_ylabel("episode return in the training reward" if shaped else "episode return")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="lower right")
     for ax in axes[len(rows) :]:
         ax.set_visible(False)
-    title = "Training episodes' return (stochastic policy) against the reference's evaluation return"
-    fig.suptitle(title if cols > 1 else title.replace(" against", "\nagainst"), fontsize=10 if cols > 1 else 9)
+    title = "Training episodes' return (stochastic policy)"
+    if any_reference:
+        title += (
+            "\nagainst the reference's evaluation return" if cols == 1 else " against the reference's evaluation return"
+        )
+    fig.suptitle(title, fontsize=10 if cols > 1 else 9)
     fig.tight_layout()
     _save_figure(fig, path)
 
@@ -577,8 +584,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         from baselines.pretrained import export_run
 
         docs = DOCS
-        commit = _commit()
-        provenance = f"measured on commit {commit}, {_machine()}, with `{report['command']}`"
+        names = {row.name for row in rows}
+        provenance = _provenance(_commit(), [r for r in records if r.get("row") in names], report["command"])
         publish_markdown(table, provenance, docs / "results.md")
         for row in rows:
             first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
@@ -593,6 +600,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             header = _header_evaluation(row, first, folder, args.episodes)
             export_run(folder, row.name, _description(row, folder, first), training=training, evaluation=header)
     return 0
+
+
+def _provenance(commit: str, records: list[dict[str, Any]], command: str) -> str:
+    """A published row's line: the commit its runs trained on (the publishing one, when it differs), the machine.
+
+    A run found done (its ``result.json``) may have trained on an older commit than the publish's; its record
+    keeps that commit (``unknown`` when written before records kept it).
+    """
+    trained = sorted({str(r.get("commit", "unknown")) for r in records if "learned" in r})
+    if trained in ([], [commit]):
+        return f"measured on commit {commit}, {_machine()}, with `{command}`"
+    return f"trained on commit {', '.join(trained)} and published from commit {commit}, {_machine()}, with `{command}`"
 
 
 def _header_evaluation(row: Row, record: dict[str, Any], folder: Path, episodes: int) -> dict[str, Any]:

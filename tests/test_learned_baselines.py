@@ -146,12 +146,57 @@ def test_the_any_team_row_is_judged_on_every_team_size_and_graph():
     assert table[4].startswith("| ↳ n = 20, `chain` |") and "| 0.50 |" in table[4]
 
 
+def test_a_published_row_names_the_commit_its_runs_trained_on_not_only_the_publishing_one():
+    same = lb._provenance("abc1234", [{"learned": {}, "commit": "abc1234"}], "python -m x --publish")
+    assert same.startswith("measured on commit abc1234, ") and same.endswith("with `python -m x --publish`")
+    runs = [{"learned": {}, "commit": "feec4e0"}, {"learned": {}, "commit": "feec4e0"}, {"failed": "exit 1"}]
+    older = lb._provenance("abc1234", runs, "cmd")
+    assert older.startswith("trained on commit feec4e0 and published from commit abc1234, ")
+    mixed = lb._provenance("abc1234", [{"learned": {}, "commit": "b"}, {"learned": {}}], "cmd")
+    assert mixed.startswith("trained on commit b, unknown and published from commit abc1234")
+
+
 def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {}  # no config.yaml: an SB3 run folder, say
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {}\n")
     assert lb._shaping(tmp_path) == {}
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {sigma_coordination: 5.0}\n")
     assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
+
+
+def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_on_the_benchmark_s_reward(
+    tmp_path, monkeypatch
+):
+    """A shaped row's curve is in its own reward: a reference line beside it would compare different rewards."""
+    pytest.importorskip("matplotlib")
+    records = []
+    for name, shaping in (("paper_speed", "{sigma_coordination: 5.0}"), ("paper_guidance", "{}")):
+        for seed, base in ((0, 0), (1, -10_000)):
+            folder = tmp_path / name / f"seed_{seed}"
+            folder.mkdir(parents=True)
+            (folder / "config.yaml").write_text(f"algo: mappo\ntrain_reward: {shaping}\n")
+            # minutes 1, 3, 4 (the row at 2 min has no finished episode)
+            returns = [base - 300, "", base - 200, base - 100]
+            rows = "".join(f"{60 * (k + 1)},{value}\n" for k, value in enumerate(returns))
+            (folder / "progress.csv").write_text("seconds,episode_return\n" + rows)
+            records.append({"row": name, "seed": seed, "learned": {}, "reference": {"return": -87.0}})
+    figures = []
+    monkeypatch.setattr(lb, "_save_figure", lambda fig, path: figures.append(fig))
+    lb.plot_learning_curves([lb.ROWS["paper_speed"], lb.ROWS["paper_guidance"]], records, tmp_path, tmp_path / "x.png")
+    shaped, plain = figures[0].axes[:2]
+
+    def horizontal(ax):
+        return [line.get_ydata()[0] for line in ax.get_lines() if len(set(np.asarray(line.get_ydata()))) == 1]
+
+    assert horizontal(shaped) == [] and "shaped training reward" in shaped.get_title()
+    assert horizontal(plain) == [-87.0]
+    assert "training reward" in shaped.get_ylabel() and plain.get_ylabel() == "episode return"
+    assert "against the reference" in figures[0]._suptitle.get_text()
+    figures.clear()
+    lb.plot_learning_curves([lb.ROWS["paper_speed"]], records, tmp_path, tmp_path / "y.png")
+    assert "reference" not in figures[0]._suptitle.get_text()  # no row of the figure has a reference line
+    mean = figures[0].axes[0].get_lines()[0].get_ydata()
+    assert mean[-1] == pytest.approx((-100 - 10_100) / 2)  # mean of the two seeds at the last common minute
 
 
 @pytest.mark.slow
