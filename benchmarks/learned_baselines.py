@@ -398,9 +398,7 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
         ax.set_visible(False)
     title = "Training episodes' return (stochastic policy)"
     if any_reference:
-        title += (
-            "\nagainst the reference's evaluation return" if cols == 1 else " against the reference's evaluation return"
-        )
+        title += ("\n" if cols == 1 else " ") + "against the reference's evaluation return"
     fig.suptitle(title, fontsize=10 if cols > 1 else 9)
     fig.tight_layout()
     _save_figure(fig, path)
@@ -584,8 +582,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from baselines.pretrained import export_run
 
         docs = DOCS
-        names = {row.name for row in rows}
-        provenance = _provenance(_commit(), [r for r in records if r.get("row") in names], report["command"])
+        provenance = _provenance(_commit(), records, report["command"])  # records: this call's rows only
         publish_markdown(table, provenance, docs / "results.md")
         for row in rows:
             first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
@@ -603,7 +600,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _provenance(commit: str, records: list[dict[str, Any]], command: str) -> str:
-    """A published row's line: the commit its runs trained on (the publishing one, when it differs), the machine.
+    """A published row's line: the commit its runs trained on (and the publishing one, when it differs), the machine.
 
     A run found done (its ``result.json``) may have trained on an older commit than the publish's; its record
     keeps that commit (``unknown`` when written before records kept it).
