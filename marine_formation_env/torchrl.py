@@ -45,7 +45,9 @@ the next reset gives formation ``b`` the initial state, channel luck
 (loss, delays, sensor noise) and therefore the whole trajectory of
 ``parallel_env(scenario, **overrides).reset(seed=s + b)`` under the same
 actions; later restarts of a formation continue its streams, as later
-``reset()`` calls of that env do.
+``reset()`` calls of that env do. ``env.set_init_noise_scale(s)`` draws later
+initial states with ``s`` ∈ [0, 1] times the scenario's ``init_noise``
+half-widths (a curriculum over the initial-state noise; 1 restores them).
 
 Physics, rewards and observations are the core's: this module only lays them
 out as tensors (:mod:`marine_formation_env.frontend` holds the rules every
@@ -245,6 +247,19 @@ class MarineFormationTorchEnv(EnvBase):
             self._obs[ids] = self.core.reset(self._initial.draw(ids), env_ids=ids)
         # the untouched formations report their current observation (TorchRL keeps their entries anyway)
         return self._tensordict(reset_output(self._obs, self._has_speed), reward=False)
+
+    def set_init_noise_scale(self, scale: float) -> None:
+        """Draw the initial states of later resets with ``scale`` × the scenario's ``init_noise`` half-widths.
+
+        For a curriculum over the initial-state noise: formations that start
+        near their lanes first, the scenario's spread (``scale`` 1, the
+        default) later. Formations already running keep their episode; seeding
+        is unchanged.
+
+        Raises:
+            ConfigError: ``scale`` is not a number in [0, 1].
+        """
+        self._initial.set_noise_scale(scale)
 
     def _reset_mask(self, tensordict: TensorDictBase | None) -> np.ndarray | None:
         """The formations to restart, ``(B,)`` bool, from a ``"_reset"`` entry (root or group); None: all."""

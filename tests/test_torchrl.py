@@ -140,6 +140,30 @@ def test_bad_arguments_are_refused_with_the_value_named():
         MarineFormationTorchEnv(num_envs=1, group="state")
 
 
+def test_a_curriculum_scales_the_initial_state_noise_of_later_resets():
+    # the paper's straight path is the inertial frame, so the noise is the deviation from the nominal start
+    half = np.array([40.0, 20.0, 0.3, 1.0])  # x, y [m], psi [rad], u [m/s]
+    env = MarineFormationTorchEnv(num_envs=64, init_noise=dict(zip(("x", "y", "psi", "u"), half, strict=True)))
+    nominal = env.config.start_state[..., :4]
+    env.set_init_noise_scale(0.25)
+    env.set_seed(0)
+    env.reset()
+    quarter = np.abs(env.core.state[..., :4] - nominal).reshape(-1, 4)
+    # uniform draws within ±0.25 of the half-widths; 192 of them reach past 0.2 in every column (else the
+    # scale would be smaller than asked: the chance that all stay below is 0.8^192 per column)
+    assert (quarter <= 0.25 * half + 1e-9).all() and (quarter > 0.2 * half).any(axis=0).all()
+    env.set_init_noise_scale(0.0)
+    env.reset()
+    np.testing.assert_array_equal(env.core.state, np.broadcast_to(env.config.start_state, env.core.state.shape))
+    env.set_init_noise_scale(1.0)  # the scenario's spread again
+    env.reset()
+    full = np.abs(env.core.state[..., :4] - nominal).reshape(-1, 4)
+    assert (full <= half + 1e-9).all() and (full > 0.5 * half).any(axis=0).all()
+    for bad in (1.5, -0.1, float("nan"), True, "0.5"):
+        with pytest.raises(ValueError, match=r"noise scale must be a number in \[0, 1\], got "):
+            env.set_init_noise_scale(bad)
+
+
 def test_render_returns_an_even_sized_frame():
     pytest.importorskip("matplotlib")
     env = MarineFormationTorchEnv(num_envs=2, render_mode="rgb_array")

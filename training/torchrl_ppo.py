@@ -35,6 +35,7 @@ nest; unknown keys and bad values are refused by name):
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
+| ``init_noise_curriculum`` | ``{start: s₀, until: f}``: the training env's initial-state noise grows (below) | null |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
 
@@ -65,6 +66,15 @@ learned baselines keep the benchmark's reward. ``progress.csv``'s
 ``mean_reward`` and ``episode_return`` are then in the shaped reward, not
 comparable with the reference's return.
 
+``init_noise_curriculum`` is a curriculum over the initial-state noise, in
+the learner's env only: before each iteration the training env draws its
+restarts with ``s₀ + (1 − s₀) · min(1, used / f)`` times the scenario's
+``init_noise`` half-widths, where ``used`` is the fraction of the budget
+spent (below), so formations start near their lanes first and with the
+scenario's spread from ``f`` of the budget on (``{start: 0.1, until: 0.5}``:
+a tenth of the spread at first, all of it at half time). The evaluation
+always uses the scenario's. ``progress.csv`` logs the scale.
+
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
 ``lr · (1 − max(seconds / (60 · minutes), frames / total_frames))``, as SB3's linear
@@ -82,7 +92,8 @@ The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 ``progress.csv`` (per iteration: frames, vessel-steps, seconds, the mean
 training reward per vessel-step, the mean return per vessel of the training
 episodes that ended in the batch and their number (counted per vessel), the
-learning rate, the last approximate KL and the number of minibatch updates) and ``evaluation.json`` (the learned
+learning rate, the last approximate KL, the number of minibatch updates and the training env's
+initial-state noise scale for the next iteration) and ``evaluation.json`` (the learned
 policy's and the reference's mean return over the same seeds). Every file is
 written atomically. ``python -m baselines.evaluate --policy RUN_FOLDER``
 evaluates the policy next to the reference.
@@ -156,6 +167,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_advantage": False,
     "normalize_reward": False,
     "train_reward": {},
+    "init_noise_curriculum": None,
     "eval_episodes": 4,
     "threads": 1,
 }
@@ -212,7 +224,22 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
     _check_train_reward(cfg)
+    cfg["init_noise_curriculum"] = _curriculum(cfg["init_noise_curriculum"])
     return cfg
+
+
+def _curriculum(value: Any) -> dict[str, float] | None:
+    """``init_noise_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys)."""
+    if value is None:
+        return None
+    key = "init_noise_curriculum"
+    if not isinstance(value, dict) or set(value) != {"start", "until"}:
+        raise TrainConfigError(f"{key} must be null or a mapping with the keys start and until, got {value!r}")
+    start = _fraction(f"{key}.start", value["start"])
+    until = _fraction(f"{key}.until", value["until"])
+    if until == 0.0:
+        raise TrainConfigError(f"{key}.until must lie in (0, 1], got {value['until']!r}")
+    return {"start": start, "until": until}
 
 
 def training_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
@@ -521,6 +548,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     episodes = EpisodeReturns()
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"])
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
+    scale = init_noise_scale(cfg, 0.0, 0)
+    env.set_init_noise_scale(scale)  # before the collector's first reset
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
@@ -579,6 +608,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         collector.update_policy_weights_()
         frames += data.numel()
         elapsed = time.perf_counter() - begin
+        # the collector steps this env object: restarts from the next batch on draw at the new scale
+        scale = init_noise_scale(cfg, elapsed, frames)
+        env.set_init_noise_scale(scale)
         rows.append(
             {
                 "frames": frames,
@@ -590,6 +622,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "lr": rate,
                 "kl": kl,
                 "updates": updates,
+                "init_noise_scale": scale,
             }
         )
         bar.update(data.numel())
@@ -608,18 +641,37 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     return summary
 
 
-def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
-    """The Adam rate of the next iteration: ``lr``, or with ``lr_schedule: linear`` ``lr`` times the budget left.
+def budget_used(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
+    """The fraction of the run's budget spent: ``max(elapsed / (60·minutes), frames / total_frames)``.
 
-    The budget left is ``1 − max(elapsed / (60·minutes), frames / total_frames)`` (``minutes`` null: frames
-    only), floored at 0.
+    ``minutes`` null: frames only. Not capped (the last iteration may pass 1).
     """
-    if cfg["lr_schedule"] == "constant":
-        return float(cfg["lr"])
     used = frames / cfg["total_frames"]
     if cfg["minutes"] is not None:
         used = max(used, elapsed / (60.0 * cfg["minutes"]))
-    return float(cfg["lr"]) * max(0.0, 1.0 - used)
+    return used
+
+
+def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
+    """The Adam rate of the next iteration: ``lr``, or with ``lr_schedule: linear`` ``lr`` times the budget left.
+
+    The budget left is ``1 −`` :func:`budget_used`, floored at 0.
+    """
+    if cfg["lr_schedule"] == "constant":
+        return float(cfg["lr"])
+    return float(cfg["lr"]) * max(0.0, 1.0 - budget_used(cfg, elapsed, frames))
+
+
+def init_noise_scale(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
+    """The training env's initial-state noise scale for the next iteration (``init_noise_curriculum``; none: 1).
+
+    ``start + (1 − start) · min(1, used / until)`` with ``used`` = :func:`budget_used`.
+    """
+    curriculum = cfg["init_noise_curriculum"]
+    if curriculum is None:
+        return 1.0
+    start, until = curriculum["start"], curriculum["until"]
+    return float(start + (1.0 - start) * min(1.0, budget_used(cfg, elapsed, frames) / until))
 
 
 def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:
@@ -690,7 +742,18 @@ def _save(
     )
     atomic_write_bytes(out / POLICY_FILE, buffer.getvalue())
     text = io.StringIO()
-    columns = ["frames", "vessel_steps", "seconds", "mean_reward", "episode_return", "episodes", "lr", "kl", "updates"]
+    columns = [
+        "frames",
+        "vessel_steps",
+        "seconds",
+        "mean_reward",
+        "episode_return",
+        "episodes",
+        "lr",
+        "kl",
+        "updates",
+        "init_noise_scale",
+    ]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
     writer.writerows(rows)
