@@ -44,16 +44,21 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from gymnasium.utils import seeding
 
 from marine_formation_env.core import COLUMNS_HINT, REWARD_COMPONENTS, FormationCore, StepOutput
-from marine_formation_env.errors import ConfigError, check_seed, checked_array
-from marine_formation_env.scenarios import ScenarioConfig, initial_state_problem, make_config, sample_initial_states
-from marine_formation_env.settings import InitNoise
+from marine_formation_env.errors import check_seed, checked_array
+from marine_formation_env.scenarios import (
+    ScenarioConfig,
+    initial_state_problem,
+    make_config,
+    sample_initial_states,
+    spread_config,
+)
 
 __all__ = [
     "RESET_OPTIONS",
@@ -215,26 +220,20 @@ class InitialStates:
         self.config = config
         # in an object array: restarts pick them by index array
         self._rngs = _generators([seeding.np_random(None)[0] for _ in range(num_formations)])
-        self._drawn_from = config  # the config draws use: ``config`` with its init_noise scaled
+        self._drawn_from = config  # the config draws use (set_spread)
 
-    def set_noise_scale(self, scale: float) -> None:
-        """Draw later initial states with ``scale`` × the scenario's ``init_noise`` half-widths.
+    def set_spread(self, scale: float) -> None:
+        """Draw later initial states from :func:`~marine_formation_env.scenarios.spread_config` at ``scale``.
 
-        A curriculum over the initial-state noise sets it between resets; the
-        formations' generators and their seeding are unchanged.
+        0: every formation starts in formation on its lanes; 1: the
+        scenario's initial state and noise. A curriculum over the initial
+        state sets it between resets; the formations' generators and their
+        seeding are unchanged.
 
         Raises:
-            ConfigError: ``scale`` is not a finite number in [0, 1].
+            ConfigError: ``scale`` is not a number in [0, 1].
         """
-        if (
-            isinstance(scale, bool)
-            or not isinstance(scale, (int, float, np.integer, np.floating))
-            or not (0.0 <= float(scale) <= 1.0)
-        ):
-            raise ConfigError(f"the initial-state noise scale must be a number in [0, 1], got {scale!r}")
-        s, noise = float(scale), self.config.init_noise
-        scaled = InitNoise(x=s * noise.x, y=s * noise.y, psi=s * noise.psi, u=s * noise.u)
-        self._drawn_from = self.config if s == 1.0 else replace(self.config, init_noise=scaled)
+        self._drawn_from = spread_config(self.config, scale)
 
     def seed(self, seeds: Sequence[int | None], ids: np.ndarray | None = None) -> None:
         """Reseed formations ``ids`` (all if None) with ``seeds`` (None keeps that formation's generator)."""

@@ -753,6 +753,43 @@ def sample_initial_state(config: ScenarioConfig, rng: np.random.Generator) -> np
     )
 
 
+def spread_config(config: ScenarioConfig, scale: float) -> ScenarioConfig:
+    """``config`` with its initial states ``scale`` of the way from the formation on its lanes to its own.
+
+    The formation on its lanes is the nominal initial state with every error
+    at zero, in the path's frame: each vessel on its lane (``y = D_y``),
+    aligned with the path (``ψ = 0`` relative to it) and coordinated
+    (``x = D_x + mean θ``, ``θ_j = x_j − D_xj`` of the nominal state), at its
+    nominal ``u, v, r``. The new nominal state is that plus ``scale`` × the
+    scenario's errors, and the ``init_noise`` half-widths are ``scale`` × the
+    scenario's: 0 starts every formation in formation, 1 is ``config``. A
+    curriculum over the initial state (the learner's env only) grows it.
+
+    Raises:
+        ConfigError: ``scale`` is not a number in [0, 1].
+    """
+    if (
+        isinstance(scale, bool)
+        or not isinstance(scale, (int, float, np.integer, np.floating))
+        or not (0.0 <= float(scale) <= 1.0)
+    ):
+        raise ConfigError(f"the initial-state spread must be a number in [0, 1], got {scale!r}")
+    s = float(scale)
+    if s == 1.0:
+        return config
+    nominal = config.initial_state
+    in_formation = np.array(nominal)
+    in_formation[:, 0] = config.formation[:, 0] + float(np.mean(nominal[:, 0] - config.formation[:, 0]))
+    in_formation[:, 1] = config.formation[:, 1]
+    in_formation[:, 2] = 0.0
+    noise = config.init_noise
+    return dataclasses.replace(
+        config,
+        initial_state=_readonly(in_formation + s * (nominal - in_formation)),
+        init_noise=InitNoise(x=s * noise.x, y=s * noise.y, psi=s * noise.psi, u=s * noise.u),
+    )
+
+
 def sample_initial_states(config: ScenarioConfig, rngs: Sequence[np.random.Generator]) -> np.ndarray:
     """One initial state per generator, ``(len(rngs), N, 6)`` (see :func:`sample_initial_state`)."""
     if config.init_noise.is_zero:

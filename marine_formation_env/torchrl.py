@@ -45,9 +45,9 @@ the next reset gives formation ``b`` the initial state, channel luck
 (loss, delays, sensor noise) and therefore the whole trajectory of
 ``parallel_env(scenario, **overrides).reset(seed=s + b)`` under the same
 actions; later restarts of a formation continue its streams, as later
-``reset()`` calls of that env do. ``env.set_init_noise_scale(s)`` draws later
-initial states with ``s`` ∈ [0, 1] times the scenario's ``init_noise``
-half-widths (a curriculum over the initial-state noise; 1 restores them).
+``reset()`` calls of that env do. ``env.set_initial_spread(s)`` starts later
+resets ``s`` ∈ [0, 1] of the way from the formation on its lanes to the
+scenario's initial state, noise included (a curriculum; 1 restores it).
 
 Physics, rewards and observations are the core's: this module only lays them
 out as tensors (:mod:`marine_formation_env.frontend` holds the rules every
@@ -248,18 +248,21 @@ class MarineFormationTorchEnv(EnvBase):
         # the untouched formations report their current observation (TorchRL keeps their entries anyway)
         return self._tensordict(reset_output(self._obs, self._has_speed), reward=False)
 
-    def set_init_noise_scale(self, scale: float) -> None:
-        """Draw the initial states of later resets with ``scale`` × the scenario's ``init_noise`` half-widths.
+    def set_initial_spread(self, scale: float) -> None:
+        """Start later resets ``scale`` of the way from the formation on its lanes to the scenario's initial state.
 
-        For a curriculum over the initial-state noise: formations that start
-        near their lanes first, the scenario's spread (``scale`` 1, the
-        default) later. Formations already running keep their episode; seeding
-        is unchanged.
+        ``scale`` multiplies every initial error of the nominal state (across
+        its lane, heading relative to the path, along-path coordination) and
+        the ``init_noise`` half-widths
+        (:func:`~marine_formation_env.scenarios.spread_config`): 0 starts every
+        formation in formation, 1 (the default) is the scenario's. For a
+        curriculum over the initial state; formations already running keep
+        their episode, and seeding is unchanged.
 
         Raises:
             ConfigError: ``scale`` is not a number in [0, 1].
         """
-        self._initial.set_noise_scale(scale)
+        self._initial.set_spread(scale)
 
     def _reset_mask(self, tensordict: TensorDictBase | None) -> np.ndarray | None:
         """The formations to restart, ``(B,)`` bool, from a ``"_reset"`` entry (root or group); None: all."""

@@ -140,28 +140,46 @@ def test_bad_arguments_are_refused_with_the_value_named():
         MarineFormationTorchEnv(num_envs=1, group="state")
 
 
-def test_a_curriculum_scales_the_initial_state_noise_of_later_resets():
-    # the paper's straight path is the inertial frame, so the noise is the deviation from the nominal start
-    half = np.array([40.0, 20.0, 0.3, 1.0])  # x, y [m], psi [rad], u [m/s]
+def test_a_curriculum_starts_later_resets_part_of_the_way_from_the_formation_on_its_lanes():
+    # the paper's straight path is the inertial frame; its nominal start (docs/model.md §5) has every vessel
+    # 30-40 m off its lane and the coordination variables θ_j = x_j − D_xj at 50, −60 and −20 m
+    env = MarineFormationTorchEnv(num_envs=2)
+    d_x, d_y = env.config.formation[:, 0], env.config.formation[:, 1]
+    nominal = np.array(env.config.start_state)
+    env.set_initial_spread(0.0)
+    env.reset()
+    state = env.core.state
+    np.testing.assert_allclose(state[..., 1], np.broadcast_to(d_y, (2, 3)))  # on the lanes
+    np.testing.assert_allclose(state[..., 2], 0.0)  # along the path
+    np.testing.assert_allclose(state[..., 0] - d_x, -10.0)  # coordinated at the nominal mean θ, (50 − 60 − 20) / 3
+    np.testing.assert_array_equal(state[..., 3:], np.broadcast_to(nominal[:, 3:], (2, 3, 3)))  # u, v, r kept
+    env.set_initial_spread(0.5)
+    env.reset()
+    in_formation = np.stack([d_x - 10.0, d_y, np.zeros(3)], axis=1)
+    np.testing.assert_allclose(env.core.state[0, :, :3], (in_formation + nominal[:, :3]) / 2)  # half-way
+    env.set_initial_spread(1.0)  # the scenario's again
+    env.reset()
+    np.testing.assert_allclose(env.core.state[0], nominal)
+    for bad in (1.5, -0.1, float("nan"), True, "0.5"):
+        with pytest.raises(ValueError, match=r"initial-state spread must be a number in \[0, 1\], got "):
+            env.set_initial_spread(bad)
+
+
+def test_the_initial_state_noise_shrinks_with_the_spread():
+    half = np.array([40.0, 20.0, 0.3, 1.0])  # init_noise half-widths: x, y [m], psi [rad], u [m/s]
     env = MarineFormationTorchEnv(num_envs=64, init_noise=dict(zip(("x", "y", "psi", "u"), half, strict=True)))
-    nominal = env.config.start_state[..., :4]
-    env.set_init_noise_scale(0.25)
+    env.set_initial_spread(0.0)
+    env.reset()
+    centre = env.core.state[0, :, :4].copy()  # no noise at 0: every formation starts there
+    np.testing.assert_array_equal(env.core.state[..., :4], np.broadcast_to(centre, (64, 3, 4)))
+    env.set_initial_spread(0.25)
     env.set_seed(0)
     env.reset()
-    quarter = np.abs(env.core.state[..., :4] - nominal).reshape(-1, 4)
+    scaled_nominal = centre + 0.25 * (np.array(env.config.start_state)[:, :4] - centre)
+    deviation = np.abs(env.core.state[..., :4] - scaled_nominal).reshape(-1, 4)
     # uniform draws within ±0.25 of the half-widths; 192 of them reach past 0.2 in every column (else the
-    # scale would be smaller than asked: the chance that all stay below is 0.8^192 per column)
-    assert (quarter <= 0.25 * half + 1e-9).all() and (quarter > 0.2 * half).any(axis=0).all()
-    env.set_init_noise_scale(0.0)
-    env.reset()
-    np.testing.assert_array_equal(env.core.state, np.broadcast_to(env.config.start_state, env.core.state.shape))
-    env.set_init_noise_scale(1.0)  # the scenario's spread again
-    env.reset()
-    full = np.abs(env.core.state[..., :4] - nominal).reshape(-1, 4)
-    assert (full <= half + 1e-9).all() and (full > 0.5 * half).any(axis=0).all()
-    for bad in (1.5, -0.1, float("nan"), True, "0.5"):
-        with pytest.raises(ValueError, match=r"noise scale must be a number in \[0, 1\], got "):
-            env.set_init_noise_scale(bad)
+    # noise would be smaller than asked: the chance that all stay below is 0.8^192 per column)
+    assert (deviation <= 0.25 * half + 1e-9).all() and (deviation > 0.2 * half).any(axis=0).all()
 
 
 def test_render_returns_an_even_sized_frame():

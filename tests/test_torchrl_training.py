@@ -65,7 +65,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         args += ["--set", item]
     assert main(args) == 0
     progress = (out / "progress.csv").read_text().splitlines()
-    header = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,init_noise_scale"
+    header = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
     assert progress[0] == header and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["frames"] == 80 and summary["vessel_steps"] == 240
@@ -145,9 +145,15 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
         ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
-        ("init_noise_curriculum={'start': 2, 'until': 0.5}", "init_noise_curriculum.start must lie in [0, 1], got 2"),
-        ("init_noise_curriculum={'start': 0.1, 'until': 0}", "init_noise_curriculum.until must lie in (0, 1], got 0"),
-        ("init_noise_curriculum={'start': 0.1}", "init_noise_curriculum must be null or a mapping with the keys"),
+        (
+            "initial_state_curriculum={'start': 2, 'until': 0.5}",
+            "initial_state_curriculum.start must lie in [0, 1], got 2",
+        ),
+        (
+            "initial_state_curriculum={'start': 0.1, 'until': 0}",
+            "initial_state_curriculum.until must lie in (0, 1], got 0",
+        ),
+        ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -226,7 +232,7 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
         args += ["--set", item]
     assert main(args) == 0
     rows = (out / "progress.csv").read_text().splitlines()
-    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,init_noise_scale"
+    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
     lr = [float(r.split(",")[6]) for r in rows[1:]]
     updates = [int(r.split(",")[8]) for r in rows[1:]]
     assert lr[0] == 1e-3 and lr[1] == pytest.approx(0.5e-3)  # the second iteration starts half-way (40 of 80 frames)
@@ -240,26 +246,26 @@ def test_the_initial_state_noise_curriculum_reaches_the_training_env_and_is_logg
     from marine_formation_env.torchrl import MarineFormationTorchEnv
 
     scales: list[float] = []
-    original = MarineFormationTorchEnv.set_init_noise_scale
+    original = MarineFormationTorchEnv.set_initial_spread
 
     def record(self, scale):
         scales.append(scale)
         original(self, scale)
 
-    monkeypatch.setattr(MarineFormationTorchEnv, "set_init_noise_scale", record)
+    monkeypatch.setattr(MarineFormationTorchEnv, "set_initial_spread", record)
     out = tmp_path / "run"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    for item in [*TINY, "init_noise_curriculum={'start': 0.2, 'until': 1.0}"]:
+    for item in [*TINY, "initial_state_curriculum={'start': 0.2, 'until': 1.0}"]:
         args += ["--set", item]
     assert main(args) == 0
     # 80 frames in two iterations of 40: 0.2 before the first, 0.2 + 0.8 * 0.5 after it, 1 after the second
     assert scales == pytest.approx([0.2, 0.6, 1.0])
     rows = (out / "progress.csv").read_text().splitlines()[1:]
     assert [float(row.split(",")[9]) for row in rows] == pytest.approx([0.6, 1.0])
-    cfg = resolve({"total_frames": 1000, "init_noise_curriculum": {"start": 0.0, "until": 0.5}}, seed=0)
-    assert trainer.init_noise_scale(cfg, 0.0, 100) == pytest.approx(0.2)  # 10 % of the budget of 50 %
-    assert trainer.init_noise_scale(cfg, 0.0, 800) == 1.0  # the scenario's from half the budget on
-    assert trainer.init_noise_scale(resolve({}, seed=0), 0.0, 0) == 1.0  # no curriculum: the scenario's
+    cfg = resolve({"total_frames": 1000, "initial_state_curriculum": {"start": 0.0, "until": 0.5}}, seed=0)
+    assert trainer.initial_spread(cfg, 0.0, 100) == pytest.approx(0.2)  # 10 % of the budget of 50 %
+    assert trainer.initial_spread(cfg, 0.0, 800) == 1.0  # the scenario's from half the budget on
+    assert trainer.initial_spread(resolve({}, seed=0), 0.0, 0) == 1.0  # no curriculum: the scenario's
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

@@ -35,7 +35,7 @@ nest; unknown keys and bad values are refused by name):
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
-| ``init_noise_curriculum`` | ``{start: s₀, until: f}``: the training env's initial-state noise grows (below) | null |
+| ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
 
@@ -66,14 +66,15 @@ learned baselines keep the benchmark's reward. ``progress.csv``'s
 ``mean_reward`` and ``episode_return`` are then in the shaped reward, not
 comparable with the reference's return.
 
-``init_noise_curriculum`` is a curriculum over the initial-state noise, in
-the learner's env only: before each iteration the training env draws its
-restarts with ``s₀ + (1 − s₀) · min(1, used / f)`` times the scenario's
-``init_noise`` half-widths, where ``used`` is the fraction of the budget
-spent (below), so formations start near their lanes first and with the
-scenario's spread from ``f`` of the budget on (``{start: 0.1, until: 0.5}``:
-a tenth of the spread at first, all of it at half time). The evaluation
-always uses the scenario's. ``progress.csv`` logs the scale.
+``initial_state_curriculum`` is a curriculum over the initial state, in the
+learner's env only: before each iteration the training env draws its
+restarts ``s₀ + (1 − s₀) · min(1, used / f)`` of the way from the formation
+on its lanes (every initial error zero) to the scenario's initial state, its
+noise scaled alike (``MarineFormationTorchEnv.set_initial_spread``), where
+``used`` is the fraction of the budget spent (below). With ``{start: 0.1,
+until: 0.5}`` the formations start with a tenth of the scenario's errors at
+first and with all of them from half the budget on. The evaluation always
+uses the scenario's. ``progress.csv`` logs the spread.
 
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
@@ -93,7 +94,7 @@ The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 training reward per vessel-step, the mean return per vessel of the training
 episodes that ended in the batch and their number (counted per vessel), the
 learning rate, the last approximate KL, the number of minibatch updates and the training env's
-initial-state noise scale for the next iteration) and ``evaluation.json`` (the learned
+initial-state spread for the next iteration) and ``evaluation.json`` (the learned
 policy's and the reference's mean return over the same seeds). Every file is
 written atomically. ``python -m baselines.evaluate --policy RUN_FOLDER``
 evaluates the policy next to the reference.
@@ -167,7 +168,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_advantage": False,
     "normalize_reward": False,
     "train_reward": {},
-    "init_noise_curriculum": None,
+    "initial_state_curriculum": None,
     "eval_episodes": 4,
     "threads": 1,
 }
@@ -224,15 +225,15 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
     _check_train_reward(cfg)
-    cfg["init_noise_curriculum"] = _curriculum(cfg["init_noise_curriculum"])
+    cfg["initial_state_curriculum"] = _curriculum(cfg["initial_state_curriculum"])
     return cfg
 
 
 def _curriculum(value: Any) -> dict[str, float] | None:
-    """``init_noise_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys)."""
+    """``initial_state_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys)."""
     if value is None:
         return None
-    key = "init_noise_curriculum"
+    key = "initial_state_curriculum"
     if not isinstance(value, dict) or set(value) != {"start", "until"}:
         raise TrainConfigError(f"{key} must be null or a mapping with the keys start and until, got {value!r}")
     start = _fraction(f"{key}.start", value["start"])
@@ -548,8 +549,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     episodes = EpisodeReturns()
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"])
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
-    scale = init_noise_scale(cfg, 0.0, 0)
-    env.set_init_noise_scale(scale)  # before the collector's first reset
+    scale = initial_spread(cfg, 0.0, 0)
+    env.set_initial_spread(scale)  # before the collector's first reset
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
@@ -609,8 +610,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         frames += data.numel()
         elapsed = time.perf_counter() - begin
         # the collector steps this env object: restarts from the next batch on draw at the new scale
-        scale = init_noise_scale(cfg, elapsed, frames)
-        env.set_init_noise_scale(scale)
+        scale = initial_spread(cfg, elapsed, frames)
+        env.set_initial_spread(scale)
         rows.append(
             {
                 "frames": frames,
@@ -622,7 +623,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "lr": rate,
                 "kl": kl,
                 "updates": updates,
-                "init_noise_scale": scale,
+                "initial_spread": scale,
             }
         )
         bar.update(data.numel())
@@ -662,12 +663,12 @@ def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
     return float(cfg["lr"]) * max(0.0, 1.0 - budget_used(cfg, elapsed, frames))
 
 
-def init_noise_scale(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
-    """The training env's initial-state noise scale for the next iteration (``init_noise_curriculum``; none: 1).
+def initial_spread(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
+    """The training env's initial-state spread for the next iteration (``initial_state_curriculum``; none: 1).
 
     ``start + (1 − start) · min(1, used / until)`` with ``used`` = :func:`budget_used`.
     """
-    curriculum = cfg["init_noise_curriculum"]
+    curriculum = cfg["initial_state_curriculum"]
     if curriculum is None:
         return 1.0
     start, until = curriculum["start"], curriculum["until"]
@@ -752,7 +753,7 @@ def _save(
         "lr",
         "kl",
         "updates",
-        "init_noise_scale",
+        "initial_spread",
     ]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
