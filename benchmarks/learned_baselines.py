@@ -18,7 +18,7 @@ row                    budget   config (``training/configs/``)
 ``paper_speed``        15 min   ``torchrl/paper_speed_mappo.yaml`` (TorchRL MAPPO)
 ``paper_guidance``     30 min   ``torchrl/paper_guidance_mappo.yaml`` (TorchRL MAPPO)
 ``paper_force``        60 min   ``paper_force_ppo.yaml`` (SB3 PPO)
-``acoustic_speed``     30 min   ``torchrl/acoustic_speed_mappo.yaml`` (TorchRL MAPPO)
+``acoustic_speed``     30 min   ``acoustic_speed_ppo.yaml`` (SB3 PPO)
 ``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO)
 ``survey_speed``       30 min   ``torchrl/survey_speed_mappo.yaml`` (TorchRL MAPPO)
 ``any_n_speed``        30 min   ``any_n_speed_ppo.yaml`` (SB3 PPO, slot network, teams of 3–6)
@@ -126,7 +126,7 @@ ROWS: dict[str, Row] = {
         Row("paper_speed", 15.0, "torchrl/paper_speed_mappo.yaml"),
         Row("paper_guidance", 30.0, "torchrl/paper_guidance_mappo.yaml"),
         Row("paper_force", 60.0, "paper_force_ppo.yaml"),
-        Row("acoustic_speed", 30.0, "torchrl/acoustic_speed_mappo.yaml"),
+        Row("acoustic_speed", 30.0, "acoustic_speed_ppo.yaml"),
         Row("acoustic_guidance", 30.0, "acoustic_guidance_ppo.yaml"),
         Row("survey_speed", 30.0, "torchrl/survey_speed_mappo.yaml"),
         Row(

@@ -55,7 +55,7 @@ def test_a_lossy_channel_row_is_measured_against_the_extrapolating_reference():
     below = lb.row_summary(row, [{**_record(0, -130.0, -400.0, 1.0, 0.01, extra=-125.0), "row": row.name}])
     assert not short["target_met"] and not below["target_met"]
     table = lb.format_table([beats], {row.name: 30.0})
-    assert "| `acoustic_speed` | torchrl | 30 | 1 | -120.0 | -400.0 | 3.33 | 90% / 100% |" in table
+    assert "| `acoustic_speed` | sb3 | 30 | 1 | -120.0 | -400.0 | 3.33 | 90% / 100% |" in table
     assert "-125.0, 100%" in table and table.endswith("| met, smooth |")
 
 
