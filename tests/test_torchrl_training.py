@@ -242,7 +242,7 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
     assert all(1 <= u < 6 for u in updates), updates
 
 
-def test_the_initial_state_noise_curriculum_reaches_the_training_env_and_is_logged(tmp_path, monkeypatch):
+def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp_path, monkeypatch):
     from marine_formation_env.torchrl import MarineFormationTorchEnv
 
     scales: list[float] = []
