@@ -160,13 +160,17 @@ def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
 
 
 def _shaping(folder: Path) -> dict[str, Any]:
-    """The run's ``train_reward`` (TorchRL's reward shaping; ``{}`` for none or another pipeline)."""
+    """The run's ``train_reward`` (its reward shaping; ``{}`` for none, or a pipeline without it)."""
     import yaml
+
+    from marine_formation_env import ENV_ID
 
     path = folder / "config.yaml"
     if not path.is_file():
         return {}
-    return dict((yaml.safe_load(path.read_text()) or {}).get("train_reward") or {})
+    config = yaml.safe_load(path.read_text()) or {}
+    config = config.get(ENV_ID, config)  # an SB3 run's config sits under the env id
+    return dict(config.get("train_reward") or {})
 
 
 def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:

@@ -175,3 +175,28 @@ def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_pa
     # the same observations padded to 30 slots act the same: the network reads the heard slots only
     padded = np.concatenate([stacked, np.zeros((20, 11 * SLOT_SIZE))], axis=1)
     np.testing.assert_allclose(portable.act_batch(padded), actions, atol=1e-6)
+
+
+def test_train_reward_shapes_every_team_s_training_env_and_nothing_else():
+    # every weight 0 and no terminal penalty: each team's training reward is exactly 0 at every step, whatever the
+    # policy does, while env_kwargs (the scenario of evaluations and exports) keeps the benchmark's reward
+    zero = {"cross_track": 0.0, "heading": 0.0, "coordination": 0.0, "speed": 0.0, "terminal_penalty": False}
+    resolved = validate({**load_config(ANY_N), "n_envs": 1, "normalize": False, "train_reward": zero})
+    assert "reward" not in resolved["env_kwargs"]
+    venv = train_module.build_env(resolved, seed=3)
+    venv.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        _, rewards, _, _ = venv.step(rng.uniform(-1, 1, (venv.num_envs, 1)).astype(np.float32))
+        assert rewards.shape == (sum(kw["n_vessels"] for kw in team_overrides(resolved)),)
+        assert np.all(rewards == 0.0)
+    venv.close()
+    unshaped = train_module.build_env({**resolved, "train_reward": {}}, seed=3)
+    unshaped.reset()
+    _, rewards, _, _ = unshaped.step(np.zeros((unshaped.num_envs, 1), np.float32))
+    assert np.all(rewards < 0.0)  # the benchmark's bounded costs are > 0 off the lanes
+    unshaped.close()
+    with pytest.raises(TrainConfigError, match="train_reward must be a mapping of reward fields, got 5"):
+        validate({**load_config(ANY_N), "train_reward": 5})
+    with pytest.raises(TrainConfigError, match="sigma_coordination must be > 0, got 0"):
+        validate({**load_config(ANY_N), "train_reward": {"sigma_coordination": 0}})

@@ -28,6 +28,12 @@ every team inherits them, and a team with another observation length or
 level is refused; the policy must read slots (``features_extractor_class:
 slots``, :mod:`training.slot_policy`, with ``normalize: {norm_obs: false}``).
 
+``train_reward`` (a mapping of reward fields, default empty) shapes the reward
+the learner trains on and nothing else, as in :mod:`training.torchrl_ppo`:
+``train_reward: {sigma_cross_track: 5.0, sigma_coordination: 5.0}`` trains
+every team on 5 m scales, while evaluations, checkpoints' headers and exports
+keep ``env_kwargs``'s reward, the benchmark's.
+
 Hyperparameter names are checked against the algorithm's constructor, env
 overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
 unknown keys raise :class:`TrainConfigError` naming them. ``learning_rate``
@@ -68,9 +74,11 @@ __all__ = [
     "TrainConfigError",
     "algo_class",
     "apply_overrides",
+    "check_train_reward",
     "config_differences",
     "load_config",
     "team_overrides",
+    "training_env_kwargs",
     "validate",
 ]
 
@@ -88,6 +96,7 @@ SPECIAL_KEYS = {
     "eval_episodes": 3,
     "checkpoint_freq": 500_000,
     "teams": [],
+    "train_reward": {},
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -223,6 +232,35 @@ def team_overrides(resolved: dict[str, Any]) -> list[dict[str, Any]]:
     return [{**resolved["env_kwargs"], **team} for team in teams]
 
 
+def training_env_kwargs(cfg: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The env overrides the learner trains on: ``env_kwargs`` with ``train_reward``'s fields in its reward.
+
+    ``env_kwargs`` defaults to the config's own (the scenario of evaluations); pass a team's overrides
+    (:func:`team_overrides`) to shape that team's reward. Evaluations and exports never see the shaping.
+    """
+    base = cfg["env_kwargs"] if env_kwargs is None else env_kwargs
+    if not cfg["train_reward"]:
+        return dict(base)
+    return {**base, "reward": {**base.get("reward", {}), **cfg["train_reward"]}}
+
+
+def check_train_reward(cfg: dict[str, Any]) -> None:
+    """``train_reward`` must be a mapping that merges into every training env's reward, with fields and values
+    the scenario's resolver accepts (it names a bad one)."""
+    shaped = cfg["train_reward"]
+    if not isinstance(shaped, dict):
+        raise TrainConfigError(f"train_reward must be a mapping of reward fields, got {shaped!r}")
+    if not shaped:
+        return
+    for kw in team_overrides(cfg) if cfg.get("teams") else [cfg["env_kwargs"]]:
+        if not isinstance(kw.get("reward", {}), dict):
+            raise TrainConfigError(f"train_reward needs env_kwargs.reward to be a mapping, got {kw['reward']!r}")
+        try:
+            make_config(cfg["scenario"], **training_env_kwargs(cfg, kw))
+        except (ValueError, TypeError) as err:
+            raise TrainConfigError(f"train_reward {shaped}: {err}") from err
+
+
 def _check_teams(resolved: dict[str, Any]) -> None:
     """Check ``teams``; pad ``env_kwargs`` (and so every team) to the largest team's slots; one layout for all."""
     teams = resolved["teams"]
@@ -320,6 +358,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
             f"set normalize: {{norm_obs: false}} (got normalize = {norm!r})"
         )
     _check_teams(resolved)
+    check_train_reward(resolved)
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
         _parse_schedule(lr)

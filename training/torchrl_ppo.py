@@ -126,7 +126,9 @@ from training.config import (
     _positive,
     _whole,
     add_run_arguments,
+    check_train_reward,
     config_from_arguments,
+    training_env_kwargs,
 )
 
 __all__ = [
@@ -224,7 +226,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         make_config(cfg["scenario"], **cfg["env_kwargs"])
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
-    _check_train_reward(cfg)
+    check_train_reward(cfg)
     cfg["initial_state_curriculum"] = _curriculum(cfg["initial_state_curriculum"])
     return cfg
 
@@ -241,32 +243,6 @@ def _curriculum(value: Any) -> dict[str, float] | None:
     if until == 0.0:
         raise TrainConfigError(f"{key}.until must lie in (0, 1], got {value['until']!r}")
     return {"start": start, "until": until}
-
-
-def training_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
-    """The env overrides the learner trains on: ``env_kwargs`` with ``train_reward``'s fields in its reward."""
-    if not cfg["train_reward"]:
-        return dict(cfg["env_kwargs"])
-    return {**cfg["env_kwargs"], "reward": {**cfg["env_kwargs"].get("reward", {}), **cfg["train_reward"]}}
-
-
-def _check_train_reward(cfg: dict[str, Any]) -> None:
-    """The shaping must merge into a mapping; the scenario's resolver checks its fields and values."""
-    from marine_formation_env.scenarios import make_config
-
-    shaped = cfg["train_reward"]
-    if not isinstance(shaped, dict):
-        raise TrainConfigError(f"train_reward must be a mapping of reward fields, got {shaped!r}")
-    if not shaped:
-        return
-    if not isinstance(cfg["env_kwargs"].get("reward", {}), dict):
-        raise TrainConfigError(
-            f"train_reward needs env_kwargs.reward to be a mapping, got {cfg['env_kwargs']['reward']!r}"
-        )
-    try:
-        make_config(cfg["scenario"], **training_env_kwargs(cfg))
-    except (ValueError, TypeError) as err:
-        raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
 
 # ----------------------------------------------------------------------------- networks

@@ -106,10 +106,10 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     """The SB3 training env: shared-policy adapter, episode monitor, optional VecNormalize."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from training.config import team_overrides
+    from training.config import team_overrides, training_env_kwargs
     from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
-    teams = team_overrides(resolved)
+    teams = [training_env_kwargs(resolved, kw) for kw in team_overrides(resolved)]  # train_reward's shaping
     if len(teams) == 1:
         venv: Any = SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **teams[0])
     else:
