@@ -252,7 +252,7 @@ def check_train_reward(cfg: dict[str, Any]) -> None:
         raise TrainConfigError(f"train_reward must be a mapping of reward fields, got {shaped!r}")
     if not shaped:
         return
-    for kw in team_overrides(cfg) if cfg.get("teams") else [cfg["env_kwargs"]]:
+    for kw in team_overrides(cfg):  # env_kwargs alone when there are no teams (the TorchRL trainer's case)
         if not isinstance(kw.get("reward", {}), dict):
             raise TrainConfigError(f"train_reward needs env_kwargs.reward to be a mapping, got {kw['reward']!r}")
         try:
