@@ -192,10 +192,29 @@ class MLPPolicy(BatchPolicy):
 
 
 #: Fixed scales of the own entries of a slot network (``training.slot_policy``): e [m], ψ [rad], u, v [m/s],
-#: r [rad/s], u_d [m/s], u̇_d [m/s²], κ, κ ahead [1/m], D_y [m].
-OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 50.0])
+#: r [rad/s], u_d [m/s], u̇_d [m/s²], κ, κ ahead [1/m], and κ·D_y in place of the lane offset D_y (see
+#: :func:`own_inputs`).
+OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
+
+
+def own_inputs(own: np.ndarray) -> np.ndarray:
+    """A slot network's own inputs: the own part (``(..., OWN_SIZE)``) with the lane offset D_y replaced by
+    κ·D_y, divided by :data:`OWN_SCALE`.
+
+    The lane offset grows with the team (a team of 20 has lanes up to ±475 m out, teams of 3 to 6 at most
+    ±125 m), so read raw it is an input no training team shows, and it biases each vessel's speed by its
+    lane: the first any-team policy held a steady spread of 1.3 m at n = 8 and 33 m at n = 20 (chain), and
+    settled when D_y was zeroed (docs/results.md). The curved-path law needs D_y only through κ·D_y
+    (u_c = (1 − κ·D_y)·w), which is 0 on a straight path whatever the team.
+    ``training.slot_policy.SlotFeatures`` does the same in torch.
+    """
+    from marine_formation_env.rules import CURVATURE, LANE_OFFSET
+
+    out = np.array(own, dtype=np.float64)
+    out[..., LANE_OFFSET] = out[..., CURVATURE] * out[..., LANE_OFFSET]
+    return out / OWN_SCALE
 
 
 def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
@@ -208,7 +227,7 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
         raise ValueError(f"an observation of size {obs.shape[-1]} is not 10 + 4·slots")
     own = obs[..., :OWN_SIZE]
     slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE)
-    own = own / OWN_SCALE
+    own = own_inputs(own)
     slots = slots / SLOT_SCALE
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], OWN_SIZE)), slots], axis=-1)

@@ -19,7 +19,7 @@ from gymnasium import spaces
 
 from baselines.pretrained import export_run, load_pretrained, slot_features
 from marine_formation_env import parallel_env
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
 from training import train as train_module
 from training.config import TrainConfigError, load_config, team_overrides, validate
 from training.learned import load_learned_policy
@@ -82,6 +82,23 @@ def test_the_features_ignore_the_order_of_the_slots_and_empty_padding():
     np.testing.assert_allclose(slot_features(alone, weights), slot_features(nothing, weights), atol=1e-12)
     with pytest.raises(ValueError, match="an observation of size 13 is not 10 \\+ 4·slots"):
         slot_features(obs[:, :13], weights)
+
+
+def test_the_lane_offset_counts_only_through_the_path_s_curvature():
+    # a team of 20 on the paper's straight path: lane offsets up to hundreds of metres, which no team of 3 to 6
+    # shows; the features must not see them (κ = 0), while on a bend (κ ≠ 0) the offset still matters
+    weights = _numpy_weights(_extractor(5, seed=2))
+    obs, _ = parallel_env("paper", n_vessels=20, topology="chain", init_noise={"x": 40.0}).reset(seed=4)
+    stacked = np.stack(list(obs.values()))
+    assert np.ptp(stacked[:, LANE_OFFSET]) > 800.0 and np.all(stacked[:, CURVATURE] == 0.0)
+    centred = stacked.copy()
+    centred[:, LANE_OFFSET] = 0.0
+    np.testing.assert_array_equal(slot_features(centred, weights), slot_features(stacked, weights))
+    bend = _observations(np.random.default_rng(3), 8, 5)
+    bend[:, CURVATURE] = 1.0 / 300.0
+    inner, outer = bend.copy(), bend.copy()
+    inner[:, LANE_OFFSET], outer[:, LANE_OFFSET] = -25.0, 25.0
+    assert np.abs(slot_features(inner, weights) - slot_features(outer, weights)).max() > 1e-3
 
 
 def test_teams_side_by_side_step_as_each_team_alone():

@@ -5,6 +5,10 @@ other vessel (``marine_formation_env.rules``); the link bit of a slot says
 whether anything was heard from that vessel. :class:`SlotFeatures` reads
 them as a set:
 
+* the own lane offset D_y is read as κ·D_y (the path's curvature times
+  D_y, the only way the curved-path law uses it), which is 0 on a straight
+  path: raw, it grows with the team and biased the first any-team policy
+  by each vessel's lane (:func:`baselines.pretrained.own_inputs`);
 * every entry is divided by a fixed scale (:data:`OWN_SCALE`,
   :data:`SLOT_SCALE`: metres by 50, speeds by 5, …), not by running
   statistics, so the same weights read every team size and the link bit
@@ -39,7 +43,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
 
 __all__ = ["SlotFeatures"]
 
@@ -63,7 +67,9 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        own = observations[..., :OWN_SIZE] / self.own_scale
+        own = observations[..., :OWN_SIZE]
+        bent = own[..., CURVATURE : CURVATURE + 1] * own[..., LANE_OFFSET : LANE_OFFSET + 1]  # κ·D_y, not D_y
+        own = torch.cat([own[..., :LANE_OFFSET], bent, own[..., LANE_OFFSET + 1 :]], dim=-1) / self.own_scale
         slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE) / self.slot_scale
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], OWN_SIZE), slots], dim=-1)
