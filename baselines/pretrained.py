@@ -225,8 +225,11 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
     obs = np.asarray(obs, dtype=np.float64)
     if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
         raise ValueError(f"an observation of size {obs.shape[-1]} is not 10 + 4·slots")
+    from baselines.reference import predicted_coordination_error
+
     own = obs[..., :OWN_SIZE]
-    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE)
+    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
+    slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
     own = own_inputs(own)
     slots = slots / SLOT_SCALE
     heard = (slots[..., :1] > 0.5).astype(np.float64)

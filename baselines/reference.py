@@ -64,7 +64,20 @@ from marine_formation_env.control import (
 from marine_formation_env.observations import ObservationLayout
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ReferencePolicy"]
+__all__ = ["ReferencePolicy", "predicted_coordination_error"]
+
+
+def predicted_coordination_error(own: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """Each slot's Δθ with the neighbour's position predicted to now from its message (``extrapolate=True``).
+
+    ``own``: the own parts ``(..., 10)``; ``slots``: ``(..., K, 4)``. A slot holds vessel i's position as it
+    was ``age`` seconds ago, so ``Δθ − ẋ_i·age`` with ``ẋ_i = ẋ_j − Δẋ`` and vessel j's own along-path rate
+    ``ẋ_j = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``; exact while i's speed holds, unchanged at age 0 (an
+    ideal link). Returns ``(..., K)``.
+    """
+    e, psi, u, v, kappa, d_y = (own[..., k] for k in (0, 1, 2, 3, 7, 9))
+    x_dot_own = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (d_y + e))
+    return np.asarray(slots[..., 1] - (x_dot_own[..., None] - slots[..., 2]) * slots[..., 3])
 
 
 class ReferencePolicy(BatchPolicy):
@@ -140,11 +153,10 @@ class ReferencePolicy(BatchPolicy):
         own, slots = self.layout.split(obs)
         # psi is the heading relative to the path (the heading itself on the straight path)
         e, psi, u, v, r, u_d, u_d_dot, kappa, _, d_y = (own[..., k] for k in range(10))
-        linked, d_theta, d_xdot, age = (slots[..., k] for k in range(4))
+        linked, d_theta, d_xdot = (slots[..., k] for k in range(3))
         metric = 1.0 - kappa * (d_y + e)  # 1 − κ·d: 1 on the straight path
         if self.extrapolate:
-            x_dot_own = (u * np.cos(psi) - v * np.sin(psi)) / metric
-            d_theta = d_theta - (x_dot_own[..., None] - d_xdot) * age
+            d_theta = predicted_coordination_error(own, slots)
         s = np.sum(linked * d_theta, axis=-1)
         s_dot = np.sum(linked * d_xdot, axis=-1)
         # (20) gives the projection's speed w; the lane's factor 1 − κ·D_y turns it into a surge command

@@ -101,6 +101,22 @@ def test_the_lane_offset_counts_only_through_the_path_s_curvature():
     assert np.abs(slot_features(inner, weights) - slot_features(outer, weights)).max() > 1e-3
 
 
+def test_a_stale_message_reads_as_the_fresh_one_at_constant_speeds():
+    # vessel j at 5.2 m/s hears i (4.6 m/s) 3 s late: the slot holds θ_j(now) − θ_i(now − 3 s) = gap + 4.6·3.
+    # The network predicts i's position now, so with its weights on the age entry itself set to 0 it must act
+    # as on what an ideal link gives (gap, age 0); read as current, the stale Δθ is another input
+    weights = _numpy_weights(_extractor(2, seed=4))
+    weights["message_w0"][OWN_SIZE + 3] = 0.0  # the age input's row
+    u_j, u_i, age, gap = 5.2, 4.6, 3.0, 12.0
+    own = [0.0, 0.0, u_j, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 25.0]
+    stale = np.array([*own, 1.0, gap + u_i * age, u_j - u_i, age, 0.0, 0.0, 0.0, 0.0])
+    fresh = np.array([*own, 1.0, gap, u_j - u_i, 0.0, 0.0, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(slot_features(stale, weights), slot_features(fresh, weights), atol=1e-12)
+    read_as_current = stale.copy()
+    read_as_current[OWN_SIZE + 3] = 0.0
+    assert np.abs(slot_features(read_as_current, weights) - slot_features(fresh, weights)).max() > 1e-3
+
+
 def test_teams_side_by_side_step_as_each_team_alone():
     kwargs = [
         {"n_vessels": 3, "topology": "ring", "observation_slots": 4, "horizon": 5.0, "init_noise": {"x": 10.0}},

@@ -9,6 +9,10 @@ them as a set:
   D_y, the only way the curved-path law uses it), which is 0 on a straight
   path: raw, it grows with the team and biased the first any-team policy
   by each vessel's lane (:func:`baselines.pretrained.own_inputs`);
+* each slot's Δθ is read as predicted to now from the message's velocity
+  and age, ``Δθ − ẋ_i·age`` (what ``reference:extrapolate`` does; the same
+  Δθ over an ideal link, where the age is 0), so over a lossy, delayed
+  channel the network need not learn that product itself;
 * every entry is divided by a fixed scale (:data:`OWN_SCALE`,
   :data:`SLOT_SCALE`: metres by 50, speeds by 5, …), not by running
   statistics, so the same weights read every team size and the link bit
@@ -68,9 +72,15 @@ class SlotFeatures(BaseFeaturesExtractor):
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         own = observations[..., :OWN_SIZE]
+        slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE)
+        # Δθ predicted to now from each message's velocity and age (baselines.reference.predicted_coordination_error)
+        e, psi, u, v = own[..., 0], own[..., 1], own[..., 2], own[..., 3]
+        metric = 1.0 - own[..., CURVATURE] * (own[..., LANE_OFFSET] + e)
+        x_dot_own = (u * torch.cos(psi) - v * torch.sin(psi)) / metric
+        predicted = slots[..., 1] - (x_dot_own.unsqueeze(-1) - slots[..., 2]) * slots[..., 3]
+        slots = torch.cat([slots[..., :1], predicted.unsqueeze(-1), slots[..., 2:]], dim=-1) / self.slot_scale
         bent = own[..., CURVATURE : CURVATURE + 1] * own[..., LANE_OFFSET : LANE_OFFSET + 1]  # κ·D_y, not D_y
         own = torch.cat([own[..., :LANE_OFFSET], bent, own[..., LANE_OFFSET + 1 :]], dim=-1) / self.own_scale
-        slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE) / self.slot_scale
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], OWN_SIZE), slots], dim=-1)
         messages = self.message(pairs) * heard
