@@ -203,8 +203,8 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
     """A slot network's own inputs: the own part (``(..., OWN_SIZE)``) with the lane offset D_y replaced by
     κ·D_y, divided by :data:`OWN_SCALE`.
 
-    The lane offset grows with the team (a team of 20 has lanes up to ±475 m out, teams of 3 to 6 at most
-    ±125 m), so read raw it is an input no training team shows, and it biases each vessel's speed by its
+    The lane offset grows with the team (the paper's lanes, 50 m apart, span −450 to 500 m at n = 20 and
+    −100 to 150 m at n = 6), so read raw it is an input no training team shows, and it biases each vessel's speed by its
     lane: the first any-team policy held a steady spread of 1.3 m at n = 8 and 33 m at n = 20 (chain), and
     settled when D_y was zeroed (docs/results.md). The curved-path law needs D_y only through κ·D_y
     (u_c = (1 − κ·D_y)·w), which is 0 on a straight path whatever the team.
