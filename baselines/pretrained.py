@@ -54,10 +54,11 @@ from typing import Any
 
 import numpy as np
 
+from baselines.reference import predicted_coordination_error
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -210,8 +211,6 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
     (u_c = (1 − κ·D_y)·w), which is 0 on a straight path whatever the team.
     ``training.slot_policy.SlotFeatures`` does the same in torch.
     """
-    from marine_formation_env.rules import CURVATURE, LANE_OFFSET
-
     out = np.array(own, dtype=np.float64)
     out[..., LANE_OFFSET] = out[..., CURVATURE] * out[..., LANE_OFFSET]
     return out / OWN_SCALE
@@ -225,8 +224,6 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
     obs = np.asarray(obs, dtype=np.float64)
     if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
         raise ValueError(f"an observation of size {obs.shape[-1]} is not 10 + 4·slots")
-    from baselines.reference import predicted_coordination_error
-
     own = obs[..., :OWN_SIZE]
     slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
     slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
