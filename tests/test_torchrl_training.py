@@ -142,6 +142,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
+        ("initial_scale=0", "initial_scale must be > 0, got 0"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
         ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
@@ -266,6 +267,18 @@ def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp
     assert trainer.initial_spread(cfg, 0.0, 100) == pytest.approx(0.2)  # 10 % of the budget of 50 %
     assert trainer.initial_spread(cfg, 0.0, 800) == 1.0  # the scenario's from half the budget on
     assert trainer.initial_spread(resolve({}, seed=0), 0.0, 0) == 1.0  # no curriculum: the scenario's
+
+
+@pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
+def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_zero(distribution):
+    # with every weight of the MLP zeroed its output is 0: the Gaussian's deviation must be exactly the configured one
+    actor = trainer._policy_network(7, 2, 1, [8], False, distribution, 0.3)
+    with torch.no_grad():
+        for weight in trainer._shared_trunk(actor).parameters():
+            weight.zero_()
+    out = actor(TensorDict({("vessel", "observation"): torch.randn(5, 1, 7)}, batch_size=[5]))
+    torch.testing.assert_close(out["vessel", "scale"], torch.full((5, 1, 2), 0.3))
+    torch.testing.assert_close(out["vessel", "loc"], torch.zeros(5, 1, 2))
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

@@ -27,6 +27,7 @@ nest; unknown keys and bad values are refused by name):
 | ``minutes`` | wall-clock limit of the run (stops after the iteration that passes it), or null | null |
 | ``hidden`` | hidden layer sizes of the policy and the critic | ``[64, 64]`` |
 | ``distribution`` | ``tanh_normal`` (TorchRL's recipe) or ``normal`` (SB3's; the env clips) | ``tanh_normal`` |
+| ``initial_scale`` | the Gaussian's standard deviation where the network's scale output is 0 (at the start) | 1.0 |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
 | ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
 | ``target_kl`` | stop an iteration's epochs once a minibatch's approximate KL exceeds 1.5 × this, or null | null |
@@ -156,6 +157,7 @@ DEFAULTS: dict[str, Any] = {
     "minutes": None,
     "hidden": [64, 64],
     "distribution": "tanh_normal",
+    "initial_scale": 1.0,
     "lr": 3e-4,
     "lr_schedule": "constant",
     "target_kl": None,
@@ -193,7 +195,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(f"env_kwargs must be a mapping, got {cfg['env_kwargs']!r}")
     for key in ("num_envs", "frames_per_batch", "total_frames", "epochs", "minibatch_size", "eval_episodes"):
         cfg[key] = _whole(key, cfg[key], 1)
-    for key in ("lr", "max_grad_norm", "clip_epsilon"):
+    for key in ("lr", "max_grad_norm", "clip_epsilon", "initial_scale"):
         cfg[key] = _positive(key, cfg[key])
     for key in ("gamma", "lmbda"):
         cfg[key] = _fraction(key, cfg[key])
@@ -363,8 +365,13 @@ def _policy_network(
     hidden: list[int],
     normalize: bool = False,
     distribution: str = "tanh_normal",
+    initial_scale: float = 1.0,
 ) -> Any:
-    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution."""
+    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution.
+
+    The scale is a biased softplus of the network's output, equal to ``initial_scale`` where that output is 0
+    (TorchRL's ``biased_softplus``), so a freshly initialized policy explores with about that deviation.
+    """
     import torch
     from tensordict.nn import NormalParamExtractor, TensorDictModule
     from torch import nn
@@ -381,7 +388,7 @@ def _policy_network(
             num_cells=hidden,
             activation_class=nn.Tanh,
         ),
-        NormalParamExtractor(),
+        NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}"),
     )
     module = TensorDictModule(
         net, in_keys=[("vessel", "observation")], out_keys=[("vessel", "loc"), ("vessel", "scale")]
@@ -476,9 +483,11 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         hidden = [int(h) for h in saved["hidden"]]
         normalize = bool(saved.get("normalize_observations", False))
         distribution = str(saved.get("distribution", "tanh_normal"))
-        actor = _policy_network(int(dims["observation"]), int(dims["action"]), 1, hidden, normalize, distribution)
-        actor.load_state_dict(saved["actor"])
         config = json.loads(saved["config"])
+        scale = float(config.get("initial_scale", 1.0))  # runs saved before the key trained with 1.0
+        sizes = int(dims["observation"]), int(dims["action"])
+        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, scale)
+        actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
     return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution), config
@@ -523,7 +532,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"])
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"], cfg["initial_scale"])
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
