@@ -1,0 +1,127 @@
+"""How long does a formation last under untrained, exploring actions? (the ``initial_scale`` of a learner)
+
+A freshly initialized Gaussian policy acts about like zero-mean Gaussian noise
+of its initial deviation. This script steps formations of a scenario under
+exactly that, actions ``a ~ N(0, s²)`` per vessel and entry (the env clips them
+to [−1, 1]), and reports how long each formation lasts before it terminates
+(a vessel leaves the workspace or the envelope |u|, |v| ≤ max_speed,
+|r| ≤ max_yaw_rate, or two vessels collide) or reaches the horizon::
+
+    python -m benchmarks.exploration --level force --scales 1,0.3,0.1
+    python -m benchmarks.exploration --level force --scales 1,0.3,0.1 --spread 0.1
+
+At the ``force`` level the actions are the surge and yaw accelerations at
+10 Hz: with SB3's and TorchRL's default deviation of 1, the yaw rate leaves its
+envelope within seconds, so a learner's early episodes are too short to teach
+it anything. ``--spread`` starts the formations that fraction of the way from
+their lanes to the scenario's initial state (as the trainers' curriculum over
+the initial state does; 1 = the scenario's own).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from marine_formation_env.atomic import atomic_write_text
+from marine_formation_env.cli import ArgumentParser, int_at_least, report_error
+from marine_formation_env.core import FormationCore
+from marine_formation_env.frontend import InitialStates
+from marine_formation_env.scenarios import SCENARIOS, make_config
+
+__all__ = ["lifetimes", "main"]
+
+
+def lifetimes(
+    scenario: str, level: str, scale: float, formations: int, seed: int, spread: float = 1.0
+) -> dict[str, Any]:
+    """Seconds each of ``formations`` formations lasts under ``N(0, scale²)`` actions (the horizon if it never ends).
+
+    Returns a dict with ``seconds`` (one entry per formation), the fractions that ended by ``collision`` and by
+    ``out_of_bounds``, and the ``horizon``.
+    """
+    if not scale > 0:
+        raise ValueError(f"scale must be > 0, got {scale!r}")
+    config = make_config(scenario, action_level=level)
+    core = FormationCore(config, formations)
+    starts = InitialStates(config, formations)
+    starts.seed(list(range(seed, seed + formations)))
+    starts.set_spread(spread)
+    core.reset(starts.draw())
+    rng = np.random.default_rng(seed)
+    steps = round(config.horizon / config.dt)
+    ended = np.full(formations, steps, dtype=np.int64)
+    collided = np.zeros(formations, dtype=bool)
+    out_of_bounds = np.zeros(formations, dtype=bool)
+    alive = np.ones(formations, dtype=bool)
+    shape = (formations, config.n_vessels, config.action_dim)
+    for k in range(steps):
+        out = core.step(rng.normal(0.0, scale, shape))
+        now = alive & np.asarray(out.terminated, dtype=bool)
+        ended[now] = k + 1
+        collided |= now & np.asarray(out.collision, dtype=bool)
+        out_of_bounds |= now & np.asarray(out.out_of_bounds, dtype=bool)
+        alive &= ~now
+        if not alive.any():
+            break
+    return {
+        "scale": scale,
+        "seconds": (ended * config.dt).tolist(),
+        "collision": float(collided.mean()),
+        "out_of_bounds": float(out_of_bounds.mean()),
+        "horizon": config.horizon,
+    }
+
+
+def _scales(text: str) -> list[float]:
+    try:
+        values = [float(s) for s in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--scales must be comma-separated numbers, got {text!r}") from None
+    bad = [v for v in values if not v > 0]
+    if bad:
+        raise ValueError(f"--scales must all be > 0, got {bad}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = ArgumentParser(prog="python -m benchmarks.exploration", description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", default="paper", choices=sorted(SCENARIOS))
+    parser.add_argument("--level", default="force", choices=["force", "guidance", "speed"])
+    parser.add_argument("--scales", default="1,0.3,0.1", help="action deviations to try (default 1,0.3,0.1)")
+    parser.add_argument("--spread", type=float, default=1.0, help="initial-state spread in [0, 1] (default 1)")
+    parser.add_argument("--formations", type=int_at_least(1), default=32, help="formations per deviation (default 32)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None, help="also write the lifetimes here")
+    args = parser.parse_args(argv)
+    if not 0.0 <= args.spread <= 1.0:
+        parser.error(f"--spread must lie in [0, 1], got {args.spread}")
+    try:
+        scales = _scales(args.scales)
+    except ValueError as err:
+        parser.error(str(err))
+    try:
+        results = [lifetimes(args.scenario, args.level, s, args.formations, args.seed, args.spread) for s in scales]
+    except (ValueError, TypeError) as err:
+        report_error(parser.prog, str(err))
+    print(f"{args.scenario}, {args.level} level, spread {args.spread:g}, {args.formations} formations")
+    print("| action deviation | lifetime [s]: median | 10 % | 90 % | to the horizon | ended out of bounds |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        seconds = np.asarray(r["seconds"])
+        print(
+            f"| {r['scale']:g} | {np.median(seconds):.1f} | {np.quantile(seconds, 0.1):.1f} | "
+            f"{np.quantile(seconds, 0.9):.1f} | {np.mean(seconds >= r['horizon']):.0%} | {r['out_of_bounds']:.0%} |"
+        )
+    if args.json is not None:
+        report = {"command": " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])]), "runs": results}
+        atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,60 @@
+"""``python -m benchmarks.exploration``: how long formations last under zero-mean Gaussian actions.
+
+Truth: the force level's physics. The yaw rate starts near 0 and its envelope
+is |r| ≤ max_yaw_rate = 1 rad/s, while the yaw acceleration is at most
+tau_r_max = 2 rad/s² (the sway-yaw coupling adds well under 1 %), so no
+formation can leave the envelope in under 0.5 s; and with no actuation at all
+a formation that starts on its lanes coasts straight, slowing down, and
+lasts the whole episode.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from benchmarks import exploration
+from marine_formation_env.scenarios import make_config
+
+pytestmark = pytest.mark.backend_independent
+
+
+def test_full_deviation_yaw_noise_ends_every_formation_but_not_faster_than_the_envelope_allows():
+    config = make_config("paper", action_level="force")
+    result = exploration.lifetimes("paper", "force", 1.0, 8, seed=0)
+    seconds = np.asarray(result["seconds"])
+    assert result["out_of_bounds"] == 1.0 and result["collision"] == 0.0
+    assert np.all(seconds < config.horizon)
+    assert seconds.min() >= config.max_yaw_rate / config.tau_r_max - 1e-9
+
+
+def test_an_unactuated_formation_on_its_lanes_coasts_through_the_whole_episode():
+    result = exploration.lifetimes("paper", "force", 1e-12, 2, seed=0, spread=0.0)
+    assert result["seconds"] == [result["horizon"]] * 2
+    assert result["out_of_bounds"] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--scales", "0,x"], "--scales must be comma-separated numbers, got '0,x'"),
+        (["--scales", "0.1,0"], "--scales must all be > 0, got [0.0]"),
+        (["--spread", "2"], "--spread must lie in [0, 1], got 2.0"),
+        (["--formations", "0"], "expected a whole number ≥ 1, got 0"),
+    ],
+)
+def test_bad_arguments_are_refused_by_name(capsys, args, message):
+    with pytest.raises(SystemExit) as stop:
+        exploration.main(args)
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_the_table_and_the_json_report_every_deviation(tmp_path, capsys):
+    out = tmp_path / "lifetimes.json"
+    assert exploration.main(["--scales", "1,0.5", "--formations", "2", "--json", str(out)]) == 0
+    assert [row["scale"] for row in json.loads(out.read_text())["runs"]] == [1.0, 0.5]
+    rows = [line.split("|")[1].strip() for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
+    assert rows == ["action deviation", "1", "0.5"]
