@@ -17,9 +17,9 @@ row                    budget   config (``training/configs/``)
 =====================  =======  =====================================================
 ``paper_speed``        15 min   ``torchrl/paper_speed_mappo.yaml`` (TorchRL MAPPO)
 ``paper_guidance``     30 min   ``torchrl/paper_guidance_mappo.yaml`` (TorchRL MAPPO)
-``paper_force``        60 min   ``paper_force_ppo.yaml`` (SB3 PPO)
+``paper_force``        60 min   ``torchrl/paper_force_mappo.yaml`` (TorchRL MAPPO)
 ``acoustic_speed``     30 min   ``acoustic_speed_ppo.yaml`` (SB3 PPO, slot network)
-``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO)
+``acoustic_guidance``  30 min   ``acoustic_guidance_ppo.yaml`` (SB3 PPO, slot network)
 ``survey_speed``       30 min   ``torchrl/survey_speed_mappo.yaml`` (TorchRL MAPPO)
 ``any_n_speed``        30 min   ``any_n_speed_ppo.yaml`` (SB3 PPO, slot network, teams of 3–6)
 =====================  =======  =====================================================
@@ -125,7 +125,7 @@ ROWS: dict[str, Row] = {
     for row in (
         Row("paper_speed", 15.0, "torchrl/paper_speed_mappo.yaml"),
         Row("paper_guidance", 30.0, "torchrl/paper_guidance_mappo.yaml"),
-        Row("paper_force", 60.0, "paper_force_ppo.yaml"),
+        Row("paper_force", 60.0, "torchrl/paper_force_mappo.yaml"),
         Row("acoustic_speed", 30.0, "acoustic_speed_ppo.yaml"),
         Row("acoustic_guidance", 30.0, "acoustic_guidance_ppo.yaml"),
         Row("survey_speed", 30.0, "torchrl/survey_speed_mappo.yaml"),
