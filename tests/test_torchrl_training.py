@@ -143,6 +143,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
+        ("action_head_gain=-1", "action_head_gain must be > 0, got -1"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
         ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
@@ -279,6 +280,20 @@ def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_ze
     out = actor(TensorDict({("vessel", "observation"): torch.randn(5, 1, 7)}, batch_size=[5]))
     torch.testing.assert_close(out["vessel", "scale"], torch.full((5, 1, 2), 0.3))
     torch.testing.assert_close(out["vessel", "loc"], torch.zeros(5, 1, 2))
+
+
+def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_its_bias():
+    # the same seed builds the same hidden layers; only the output layer differs: loc = gain · (W h), W h = loc₀ − b₀
+    obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
+    torch.manual_seed(5)
+    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3)
+    torch.manual_seed(5)
+    small = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01)
+    *_, bias = trainer._shared_trunk(plain).parameters()
+    with torch.no_grad():
+        loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
+    torch.testing.assert_close(loc_small, 0.01 * (loc_plain - bias[:2]))
+    assert float(loc_small.abs().max()) < 0.05  # the first actions' means are near 0 on any observation
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

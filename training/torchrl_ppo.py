@@ -28,6 +28,7 @@ nest; unknown keys and bad values are refused by name):
 | ``hidden`` | hidden layer sizes of the policy and the critic | ``[64, 64]`` |
 | ``distribution`` | ``tanh_normal`` (TorchRL's recipe) or ``normal`` (SB3's; the env clips) | ``tanh_normal`` |
 | ``initial_scale`` | the Gaussian's standard deviation where the network's scale output is 0 (at the start) | 1.0 |
+| ``action_head_gain`` | scale the last layer's initial weights by this and zero its bias (SB3: 0.01), or null | null |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
 | ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
 | ``target_kl`` | stop an iteration's epochs once a minibatch's approximate KL exceeds 1.5 × this, or null | null |
@@ -158,6 +159,7 @@ DEFAULTS: dict[str, Any] = {
     "hidden": [64, 64],
     "distribution": "tanh_normal",
     "initial_scale": 1.0,
+    "action_head_gain": None,
     "lr": 3e-4,
     "lr_schedule": "constant",
     "target_kl": None,
@@ -213,6 +215,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg["target_kl"] = _positive("target_kl", cfg["target_kl"])
     if cfg["threads"] is not None:
         cfg["threads"] = _whole("threads", cfg["threads"], 1)
+    if cfg["action_head_gain"] is not None:
+        cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
     if cfg["frames_per_batch"] % cfg["num_envs"]:
         raise TrainConfigError(
@@ -366,11 +370,15 @@ def _policy_network(
     normalize: bool = False,
     distribution: str = "tanh_normal",
     initial_scale: float = 1.0,
+    action_head_gain: float | None = None,
 ) -> Any:
     """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution.
 
     The scale is a biased softplus of the network's output, equal to ``initial_scale`` where that output is 0
     (TorchRL's ``biased_softplus``), so a freshly initialized policy explores with about that deviation.
+    With ``action_head_gain`` the MLP's last layer starts with its weights scaled by it and a zero bias, so the
+    first actions' means are near 0 and their deviations near ``initial_scale`` (SB3 initializes its action
+    layer with gain 0.01; TorchRL's default leaves means of about ±0.1 and more on unscaled observations).
     """
     import torch
     from tensordict.nn import NormalParamExtractor, TensorDictModule
@@ -390,6 +398,11 @@ def _policy_network(
         ),
         NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}"),
     )
+    if action_head_gain is not None:
+        *_, weight, bias = net[-2].parameters()  # the MultiAgentMLP's output layer
+        with torch.no_grad():
+            weight.mul_(action_head_gain)
+            bias.zero_()
     module = TensorDictModule(
         net, in_keys=[("vessel", "observation")], out_keys=[("vessel", "loc"), ("vessel", "scale")]
     )
@@ -532,7 +545,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, cfg["distribution"], cfg["initial_scale"])
+    exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"]
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration)
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
