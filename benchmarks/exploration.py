@@ -30,8 +30,13 @@ import numpy as np
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, report_error
 from marine_formation_env.core import FormationCore
+from marine_formation_env.dynamics import R, U, V, X, Y
 from marine_formation_env.frontend import InitialStates
+from marine_formation_env.rules import outside_workspace
 from marine_formation_env.scenarios import SCENARIOS, make_config
+
+#: What ended a formation, checked in this order on its last state.
+CAUSES = ("yaw_rate", "speed", "workspace", "collision")
 
 __all__ = ["lifetimes", "main"]
 
@@ -41,8 +46,9 @@ def lifetimes(
 ) -> dict[str, Any]:
     """Seconds each of ``formations`` formations lasts under ``N(0, scale²)`` actions (the horizon if it never ends).
 
-    Returns a dict with ``seconds`` (one entry per formation), the fractions that ended by ``collision`` and by
-    ``out_of_bounds``, and the ``horizon``.
+    Returns a dict with ``seconds`` (one entry per formation), ``ended_by``: the fraction of formations that each
+    bound ended (:data:`CAUSES`: |r| > max_yaw_rate, |u| or |v| > max_speed, outside the workspace, two vessels
+    closer than the safety distance; the first that holds on the last state), and the ``horizon``.
     """
     if not scale > 0:
         raise ValueError(f"scale must be > 0, got {scale!r}")
@@ -55,26 +61,35 @@ def lifetimes(
     rng = np.random.default_rng(seed)
     steps = round(config.horizon / config.dt)
     ended = np.full(formations, steps, dtype=np.int64)
-    collided = np.zeros(formations, dtype=bool)
-    out_of_bounds = np.zeros(formations, dtype=bool)
+    counts = dict.fromkeys(CAUSES, 0)
     alive = np.ones(formations, dtype=bool)
     shape = (formations, config.n_vessels, config.action_dim)
     for k in range(steps):
         out = core.step(rng.normal(0.0, scale, shape))
         now = alive & np.asarray(out.terminated, dtype=bool)
         ended[now] = k + 1
-        collided |= now & np.asarray(out.collision, dtype=bool)
-        out_of_bounds |= now & np.asarray(out.out_of_bounds, dtype=bool)
+        for last in core.state[now]:  # a terminated formation keeps its last state (nothing restarts it)
+            counts[_cause(config, last)] += 1
         alive &= ~now
         if not alive.any():
             break
     return {
         "scale": scale,
         "seconds": (ended * config.dt).tolist(),
-        "collision": float(collided.mean()),
-        "out_of_bounds": float(out_of_bounds.mean()),
+        "ended_by": {cause: counts[cause] / formations for cause in CAUSES},
         "horizon": config.horizon,
     }
+
+
+def _cause(config: Any, state: np.ndarray) -> str:
+    """Which bound a terminated formation's last state ``(N, 6)`` broke, the first of :data:`CAUSES` that holds."""
+    if np.any(np.abs(state[:, R]) > config.max_yaw_rate):
+        return "yaw_rate"
+    if np.any(np.abs(state[:, [U, V]]) > config.max_speed):
+        return "speed"
+    if np.any(outside_workspace(state[:, X], state[:, Y], *config.workspace)) or not np.all(np.isfinite(state)):
+        return "workspace"
+    return "collision"
 
 
 def _scales(text: str) -> list[float]:
@@ -109,13 +124,14 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, TypeError) as err:
         report_error(parser.prog, str(err))
     print(f"{args.scenario}, {args.level} level, spread {args.spread:g}, {args.formations} formations")
-    print("| action deviation | lifetime [s]: median | 10 % | 90 % | to the horizon | ended out of bounds |")
+    print("| action deviation | lifetime [s]: median | 10 % | 90 % | to the horizon | ended by |")
     print("|---|---|---|---|---|---|")
     for r in results:
         seconds = np.asarray(r["seconds"])
+        causes = ", ".join(f"{c.replace('_', ' ')} {f:.0%}" for c, f in r["ended_by"].items() if f > 0) or "–"
         print(
             f"| {r['scale']:g} | {np.median(seconds):.1f} | {np.quantile(seconds, 0.1):.1f} | "
-            f"{np.quantile(seconds, 0.9):.1f} | {np.mean(seconds >= r['horizon']):.0%} | {r['out_of_bounds']:.0%} |"
+            f"{np.quantile(seconds, 0.9):.1f} | {np.mean(seconds >= r['horizon']):.0%} | {causes} |"
         )
     if args.json is not None:
         report = {"command": " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])]), "runs": results}

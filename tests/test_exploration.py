@@ -3,7 +3,9 @@
 Truth: the force level's physics. The yaw rate starts near 0 and its envelope
 is |r| ≤ max_yaw_rate = 1 rad/s, while the yaw acceleration is at most
 tau_r_max = 2 rad/s² (the sway-yaw coupling adds well under 1 %), so no
-formation can leave the envelope in under 0.5 s; and with no actuation at all
+formation can leave the envelope in under 0.5 s (its surge speed, starting
+near 5 m/s with at most 3 m/s², cannot reach max_speed = 14 m/s sooner
+either); and with no actuation at all
 a formation that starts on its lanes coasts straight, slowing down, and
 lasts the whole episode.
 """
@@ -25,7 +27,7 @@ def test_full_deviation_yaw_noise_ends_every_formation_but_not_faster_than_the_e
     config = make_config("paper", action_level="force")
     result = exploration.lifetimes("paper", "force", 1.0, 8, seed=0)
     seconds = np.asarray(result["seconds"])
-    assert result["out_of_bounds"] == 1.0 and result["collision"] == 0.0
+    assert sum(result["ended_by"].values()) == 1.0 and result["ended_by"]["collision"] == 0.0
     assert np.all(seconds < config.horizon)
     assert seconds.min() >= config.max_yaw_rate / config.tau_r_max - 1e-9
 
@@ -33,7 +35,22 @@ def test_full_deviation_yaw_noise_ends_every_formation_but_not_faster_than_the_e
 def test_an_unactuated_formation_on_its_lanes_coasts_through_the_whole_episode():
     result = exploration.lifetimes("paper", "force", 1e-12, 2, seed=0, spread=0.0)
     assert result["seconds"] == [result["horizon"]] * 2
-    assert result["out_of_bounds"] == 0.0
+    assert not any(result["ended_by"].values())
+
+
+def test_each_ended_formation_is_charged_to_the_bound_its_last_state_breaks():
+    config = make_config("paper", action_level="force")
+    state = np.zeros((3, 6))
+    state[:, 0] = [0.0, 0.0, 1000.0]  # x [m]: far apart, inside the workspace
+    assert exploration._cause(config, state) == "collision"  # no bound broken: the core saw vessels too close
+    state[1, 5] = 1.5  # r [rad/s] beyond max_yaw_rate = 1
+    state[2, 4] = 20.0  # v [m/s] beyond max_speed = 14
+    assert exploration._cause(config, state) == "yaw_rate"
+    state[1, 5] = 0.0
+    assert exploration._cause(config, state) == "speed"
+    state[2, 4] = 0.0
+    state[0, 1] = 1e9  # y [m]
+    assert exploration._cause(config, state) == "workspace"
 
 
 @pytest.mark.parametrize(
