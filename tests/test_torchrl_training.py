@@ -215,6 +215,26 @@ def test_training_sets_torch_s_threads_from_the_config(tmp_path, monkeypatch):
     assert calls == [2]
 
 
+def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end(tmp_path, monkeypatch):
+    # with the save interval at 0 s every iteration saves: the first save holds one iteration's row and a policy
+    # that loads; the last (after training) holds both iterations
+    saves: list[tuple[int, bool]] = []
+    save = trainer._save
+
+    def spy(out, *args):
+        save(out, *args)
+        saves.append((len((out / "progress.csv").read_text().splitlines()) - 1, (out / trainer.POLICY_FILE).is_file()))
+        load_torch_policy(out)
+
+    monkeypatch.setattr(trainer, "SAVE_SECONDS", 0.0)
+    monkeypatch.setattr(trainer, "_save", spy)
+    args = ["--out", str(tmp_path / "run"), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    for item in TINY:
+        args += ["--set", item]
+    assert main(args) == 0
+    assert saves[0] == (1, True) and saves[-1] == (2, True)
+
+
 def test_the_linear_schedule_falls_to_zero_over_whichever_budget_runs_out_first():
     cfg = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000, "minutes": 10}, seed=0)
     assert trainer.learning_rate(cfg, 0.0, 0) == 1e-3

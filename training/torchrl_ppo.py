@@ -98,8 +98,11 @@ episodes that ended in the batch and their number (counted per vessel), the
 learning rate, the last approximate KL, the number of minibatch updates and the training env's
 initial-state spread for the next iteration) and ``evaluation.json`` (the learned
 policy's and the reference's mean return over the same seeds). Every file is
-written atomically. ``python -m baselines.evaluate --policy RUN_FOLDER``
-evaluates the policy next to the reference.
+written atomically; ``policy.pt`` and ``progress.csv`` are also written once a
+minute during training (:data:`SAVE_SECONDS`), so a long run can be watched and
+an interrupted one keeps its last minute's policy.
+``python -m baselines.evaluate --policy RUN_FOLDER`` evaluates the policy next
+to the reference.
 """
 
 from __future__ import annotations
@@ -183,6 +186,8 @@ ALGOS = ("mappo", "ippo")
 LR_SCHEDULES = ("constant", "linear")
 DISTRIBUTIONS = ("tanh_normal", "normal")
 POLICY_FILE = "policy.pt"
+#: Seconds of training between the intermediate saves of ``policy.pt`` and ``progress.csv``.
+SAVE_SECONDS = 60.0
 
 
 def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
@@ -581,6 +586,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
     rows: list[dict[str, Any]] = []
     begin = time.perf_counter()
+    saved_at = 0.0
     frames = 0
     bar = _progress(cfg["total_frames"], progress)
     for data in collector:
@@ -629,6 +635,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         bar.set_postfix(reward=f"{rows[-1]['mean_reward']:.4f}")
         if cfg["minutes"] is not None and elapsed >= 60.0 * cfg["minutes"]:
             break
+        if elapsed - saved_at >= SAVE_SECONDS:  # a save takes milliseconds
+            _save(out, actor, cfg, obs_dim, action_dim, rows)
+            saved_at = elapsed
     bar.close()
     collector.shutdown()
     _save(out, actor, cfg, obs_dim, action_dim, rows)
