@@ -44,7 +44,7 @@ from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
 from training import run_folder
-from training.callbacks import EVAL_SEED, WallClockBudget, evaluate_policy_episodes
+from training.callbacks import EVAL_SEED, evaluate_policy_episodes
 from training.config import apply_overrides, load_config, validate
 from training.learned import ModelPolicy
 from training.train import train
@@ -82,7 +82,7 @@ def run_benchmark(
         out,
         seed,
         progress=progress,
-        extra_callbacks=[WallClockBudget(60.0 * minutes)],
+        minutes=minutes,
         config_record={**resolved, "seed": seed},
     )
     wall = time.perf_counter() - start

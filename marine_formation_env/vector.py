@@ -189,6 +189,19 @@ class MarineFormationVectorEnv(VectorEnv):
     def _reset_formations(self, ids: np.ndarray) -> np.ndarray:
         return self.core.reset(self._initial.draw(ids), env_ids=ids)
 
+    def set_initial_spread(self, scale: float) -> None:
+        """Start later resets and autoresets ``scale`` of the way from the formation on its lanes to the scenario's
+        initial state (0: in formation; 1, the default: the scenario's own), its noise scaled alike.
+
+        For a curriculum over the initial state (the learner's env only, as
+        ``MarineFormationTorchEnv.set_initial_spread``); formations already
+        running keep their episode, and seeding is unchanged.
+
+        Raises:
+            ConfigError: ``scale`` is not a number in [0, 1].
+        """
+        self._initial.set_spread(scale)
+
     # ---------------------------------------------------------------- layouts
     def _layout_obs(self, obs: np.ndarray) -> np.ndarray:
         if self.layout == "joint":

@@ -584,3 +584,64 @@ def test_resume_without_a_run_is_refused(tmp_path, capsys):
         train_module.main(["--resume", "--out", str(tmp_path / "nothing"), "--quiet"])
     assert exc.value.code == 2
     assert "config.yaml" in capsys.readouterr().err
+
+
+# =========================================================================== (d) curriculum over the initial state
+
+
+def test_a_zero_spread_starts_every_formation_in_formation_on_its_lanes():
+    # truth: spread 0 is the formation on its lanes (each vessel on its lane, aligned with the path, coordinated),
+    # its noise scaled to 0 too; the paper's own start is 20-40 m off
+    venv = SharedPolicyVecEnv(3, "paper", action_level="speed", init_noise={"x": 40.0, "y": 20.0, "psi": 0.3})
+    venv.seed(7)
+    first = venv.reset()
+    assert np.abs(first[:, 0]).max() > 10.0  # cross-track error [m] of the scenario's start
+    venv.set_initial_spread(0.0)
+    venv.seed(7)
+    obs = venv.reset()
+    own, slots = obs[:, :10], obs[:, 10:].reshape(len(obs), -1, 4)
+    np.testing.assert_allclose(own[:, :2], 0.0, atol=1e-9)  # e [m] and ψ relative to the path [rad]
+    np.testing.assert_allclose(slots[..., 1], 0.0, atol=1e-9)  # Δθ to every neighbour heard [m]
+
+
+def test_sb3_training_follows_the_curriculum_over_its_budget(tmp_path, monkeypatch):
+    spreads: list[float] = []
+    original = SharedPolicyVecEnv.set_initial_spread
+
+    def record(self, scale):
+        spreads.append(scale)
+        original(self, scale)
+
+    monkeypatch.setattr(SharedPolicyVecEnv, "set_initial_spread", record)
+    args = [*SMOKE_ARGS, "--set", "n_timesteps=768", "--set", "eval_freq=0", "--set", "checkpoint_freq=0"]
+    args += ["--set", "initial_state_curriculum={'start': 0.2, 'until': 1.0}", "--out", str(tmp_path / "run")]
+    assert train_module.main(args) == 0
+    # 2 formations x 3 vessels x 64 steps = 384 vessel-steps per rollout, two rollouts of the 768: set before
+    # learn() resets (0.2), before the first rollout (0 used: 0.2), before the second (half used: 0.2 + 0.8 * 0.5)
+    assert spreads == pytest.approx([0.2, 0.2, 0.6])
+    recorded = yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())
+    assert recorded[marine_formation_env.ENV_ID]["initial_state_curriculum"] == {"start": 0.2, "until": 1.0}
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ({"start": 2, "until": 0.5}, "initial_state_curriculum.start must lie in [0, 1], got 2"),
+        ({"start": 0.1, "until": 0}, "initial_state_curriculum.until must lie in (0, 1], got 0"),
+        ({"start": 0.1}, "initial_state_curriculum must be null or a mapping with the keys start and until"),
+    ],
+)
+def test_validate_rejects_a_bad_curriculum_by_name(value, message):
+    with pytest.raises(TrainConfigError) as err:
+        validate({**base_config(), "initial_state_curriculum": value})
+    assert message in str(err.value)
+
+
+def test_the_curriculum_counts_wall_time_when_the_budget_is_minutes():
+    from training.callbacks import InitialStateCurriculum
+
+    callback = InitialStateCurriculum({"start": 0.0, "until": 0.5}, total_steps=10**9, seconds=100.0)
+    callback.start -= 25.0  # a quarter of the 100 s spent, no steps: half of the curriculum's 50 %
+    assert callback.spread() == pytest.approx(0.5, abs=0.01)
+    callback.start -= 100.0
+    assert callback.spread() == 1.0

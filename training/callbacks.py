@@ -29,6 +29,7 @@ __all__ = [
     "EVAL_SEED",
     "PROGRESS_COLUMNS",
     "AtomicCheckpointCallback",
+    "InitialStateCurriculum",
     "ProgressLog",
     "ReferenceEvalCallback",
     "StopRequest",
@@ -284,3 +285,43 @@ class WallClockBudget(BaseCallback):
 
     def _on_step(self) -> bool:
         return time.perf_counter() - self.start < self.seconds
+
+
+class InitialStateCurriculum(BaseCallback):
+    """A curriculum over the initial state (``initial_state_curriculum``): before each rollout the training env's
+    later (auto)resets start ``start + (1 − start) · min(1, used / until)`` of the way from the formation on its
+    lanes to the scenario's initial state (:func:`training.config.curriculum_spread`).
+
+    ``used`` is the fraction of the budget spent, whichever of ``total_steps`` vessel-steps and ``seconds`` of
+    wall time (counted from this ``learn`` call) runs out first, as the TorchRL trainer counts it. The innermost
+    VecEnv (``SharedPolicyVecEnv`` or ``TeamsVecEnv``) must have ``set_initial_spread``.
+    """
+
+    def __init__(self, curriculum: dict[str, float], total_steps: int, seconds: float | None = None) -> None:
+        super().__init__()
+        self.curriculum = curriculum
+        self.total_steps = max(1, int(total_steps))
+        self.seconds = seconds
+        self.start = time.perf_counter()
+        self.spreads: list[float] = []  # the spread set before each rollout
+
+    def spread(self) -> float:
+        """The spread for the next rollout."""
+        from training.config import curriculum_spread
+
+        used = self.num_timesteps / self.total_steps
+        if self.seconds is not None:
+            used = max(used, (time.perf_counter() - self.start) / self.seconds)
+        return curriculum_spread(self.curriculum, used)
+
+    def _on_training_start(self) -> None:
+        self.start = time.perf_counter()
+
+    def _on_rollout_start(self) -> None:
+        scale = self.spread()
+        env: Any = self.training_env.unwrapped  # SharedPolicyVecEnv or TeamsVecEnv
+        env.set_initial_spread(scale)
+        self.spreads.append(scale)
+
+    def _on_step(self) -> bool:
+        return True

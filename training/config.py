@@ -74,8 +74,10 @@ __all__ = [
     "TrainConfigError",
     "algo_class",
     "apply_overrides",
+    "check_curriculum",
     "check_train_reward",
     "config_differences",
+    "curriculum_spread",
     "load_config",
     "team_overrides",
     "training_env_kwargs",
@@ -97,6 +99,7 @@ SPECIAL_KEYS = {
     "checkpoint_freq": 500_000,
     "teams": [],
     "train_reward": {},
+    "initial_state_curriculum": None,
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -261,6 +264,33 @@ def check_train_reward(cfg: dict[str, Any]) -> None:
             raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
 
+def check_curriculum(value: Any) -> dict[str, float] | None:
+    """``initial_state_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys).
+
+    The learner's env starts its formations ``start + (1 − start) · min(1, used / until)`` of the way from
+    the formation on its lanes to the scenario's initial state, ``used`` being the fraction of the run's
+    budget spent (:func:`curriculum_spread`); both trainers take it.
+    """
+    if value is None:
+        return None
+    key = "initial_state_curriculum"
+    if not isinstance(value, dict) or set(value) != {"start", "until"}:
+        raise TrainConfigError(f"{key} must be null or a mapping with the keys start and until, got {value!r}")
+    start = _fraction(f"{key}.start", value["start"])
+    until = _fraction(f"{key}.until", value["until"])
+    if until == 0.0:
+        raise TrainConfigError(f"{key}.until must lie in (0, 1], got {value['until']!r}")
+    return {"start": start, "until": until}
+
+
+def curriculum_spread(curriculum: dict[str, float] | None, used: float) -> float:
+    """The initial-state spread once the fraction ``used`` of the budget is spent (no curriculum: 1)."""
+    if curriculum is None:
+        return 1.0
+    start, until = curriculum["start"], curriculum["until"]
+    return float(start + (1.0 - start) * min(1.0, used / until))
+
+
 def _check_teams(resolved: dict[str, Any]) -> None:
     """Check ``teams``; pad ``env_kwargs`` (and so every team) to the largest team's slots; one layout for all."""
     teams = resolved["teams"]
@@ -359,6 +389,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
         )
     _check_teams(resolved)
     check_train_reward(resolved)
+    resolved["initial_state_curriculum"] = check_curriculum(resolved["initial_state_curriculum"])
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
         _parse_schedule(lr)

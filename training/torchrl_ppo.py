@@ -131,8 +131,10 @@ from training.config import (
     _positive,
     _whole,
     add_run_arguments,
+    check_curriculum,
     check_train_reward,
     config_from_arguments,
+    curriculum_spread,
     training_env_kwargs,
 )
 
@@ -238,22 +240,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
     check_train_reward(cfg)
-    cfg["initial_state_curriculum"] = _curriculum(cfg["initial_state_curriculum"])
+    cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
     return cfg
-
-
-def _curriculum(value: Any) -> dict[str, float] | None:
-    """``initial_state_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys)."""
-    if value is None:
-        return None
-    key = "initial_state_curriculum"
-    if not isinstance(value, dict) or set(value) != {"start", "until"}:
-        raise TrainConfigError(f"{key} must be null or a mapping with the keys start and until, got {value!r}")
-    start = _fraction(f"{key}.start", value["start"])
-    until = _fraction(f"{key}.until", value["until"])
-    if until == 0.0:
-        raise TrainConfigError(f"{key}.until must lie in (0, 1], got {value['until']!r}")
-    return {"start": start, "until": until}
 
 
 # ----------------------------------------------------------------------------- networks
@@ -676,11 +664,7 @@ def initial_spread(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
 
     ``start + (1 − start) · min(1, used / until)`` with ``used`` = :func:`budget_used`.
     """
-    curriculum = cfg["initial_state_curriculum"]
-    if curriculum is None:
-        return 1.0
-    start, until = curriculum["start"], curriculum["until"]
-    return float(start + (1.0 - start) * min(1.0, budget_used(cfg, elapsed, frames) / until))
+    return curriculum_spread(cfg["initial_state_curriculum"], budget_used(cfg, elapsed, frames))
 
 
 def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:

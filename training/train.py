@@ -199,8 +199,16 @@ def train(
     verbose: int = 0,
     threads: int = 1,
     config_record: dict[str, Any] | None = None,
+    minutes: float | None = None,
 ) -> Any:
     """Train (or resume) and save into ``out``; return the model.
+
+    ``minutes`` also stops training after that much wall time (the learning
+    benchmarks' budget); a curriculum over the initial state
+    (``initial_state_curriculum``) then runs over whichever of it and
+    ``n_timesteps`` runs out first (:class:`~training.callbacks.InitialStateCurriculum`).
+    Before the first rollout the training env is set to the curriculum's first
+    spread, so the very first episodes follow it too.
 
     ``threads`` sets torch's intra-op threads: the networks are small, and on a
     2-core machine one thread leaves the other core to the simulation (measured:
@@ -222,7 +230,15 @@ def train(
     torch.set_num_threads(threads)
     from stable_baselines3.common.callbacks import CallbackList
 
-    from training.callbacks import AtomicCheckpointCallback, ProgressLog, ReferenceEvalCallback, StopRequest
+    from training.callbacks import (
+        AtomicCheckpointCallback,
+        InitialStateCurriculum,
+        ProgressLog,
+        ReferenceEvalCallback,
+        StopRequest,
+        WallClockBudget,
+    )
+    from training.config import curriculum_spread
 
     out.mkdir(parents=True, exist_ok=True)
     for note in run_folder.recover(out):
@@ -259,6 +275,15 @@ def train(
         if resume:
             evaluation.restore_best()
         callbacks.append(evaluation)
+    seconds = None if minutes is None else 60.0 * float(minutes)
+    if seconds is not None:
+        callbacks.append(WallClockBudget(seconds))
+    curriculum = resolved.get("initial_state_curriculum")
+    if curriculum is not None:
+        total = max(1, resolved["n_timesteps"])
+        # before learn()'s first reset: the first episodes start at the curriculum's spread as well
+        venv.unwrapped.set_initial_spread(curriculum_spread(curriculum, model.num_timesteps / total))
+        callbacks.append(InitialStateCurriculum(curriculum, total, seconds))
     callbacks.extend(extra_callbacks)
 
     def on_sigint(signum: int, frame: Any) -> None:

@@ -85,6 +85,10 @@ class SharedPolicyVecEnv(VecEnv):
             entry_infos.append(info)
         return obs, reward.astype(np.float32), dones, entry_infos
 
+    def set_initial_spread(self, scale: float) -> None:
+        """The initial-state spread of later (auto)resets (a curriculum; ``MarineFormationVectorEnv``)."""
+        self.venv.set_initial_spread(scale)
+
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset: formation ``b`` starts from ``seed + b`` (all its vessels share it)."""
         if seed is None:
@@ -189,6 +193,11 @@ class TeamsVecEnv(VecEnv):
             np.concatenate([p[2] for p in parts]),
             infos,
         )
+
+    def set_initial_spread(self, scale: float) -> None:
+        """The initial-state spread of every team's later (auto)resets."""
+        for team in self.teams:
+            team.set_initial_spread(scale)
 
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         if seed is None:
