@@ -42,10 +42,16 @@ TINY = [
 
 
 @pytest.mark.parametrize(
-    ("algo", "distribution"), [("mappo", "tanh_normal"), ("ippo", "tanh_normal"), ("mappo", "normal")]
+    ("algo", "distribution", "scale"),
+    [
+        ("mappo", "tanh_normal", "state_dependent"),
+        ("ippo", "tanh_normal", "state_dependent"),
+        ("mappo", "normal", "state_dependent"),
+        ("mappo", "normal", "state_independent"),
+    ],
 )
 def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_deterministic_actor(
-    tmp_path, algo, distribution
+    tmp_path, algo, distribution, scale
 ):
     out = tmp_path / algo
     args = [
@@ -58,6 +64,8 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         f"algo={algo}",
         "--set",
         f"distribution={distribution}",
+        "--set",
+        f"scale={scale}",
         "--set",
         "env_kwargs.action_level=speed",
     ]
@@ -72,7 +80,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
     assert summary["reference_return"] < 0
     policy, config = load_torch_policy(out)
-    assert config["algo"] == algo and config["seed"] == 3
+    assert config["algo"] == algo and config["seed"] == 3 and config["scale"] == scale
     obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
     mine = policy.act_batch(obs)
     assert mine.shape == (6, 3, 1) and np.all(np.abs(mine) <= 1.0)
@@ -143,6 +151,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
+        ("scale=fixed", "scale must be one of ['state_dependent', 'state_independent'], got 'fixed'"),
         ("action_head_gain=-1", "action_head_gain must be > 0, got -1"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
@@ -300,6 +309,16 @@ def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_ze
     out = actor(TensorDict({("vessel", "observation"): torch.randn(5, 1, 7)}, batch_size=[5]))
     torch.testing.assert_close(out["vessel", "scale"], torch.full((5, 1, 2), 0.3))
     torch.testing.assert_close(out["vessel", "loc"], torch.zeros(5, 1, 2))
+
+
+def test_a_state_independent_scale_starts_at_initial_scale_whatever_the_observation_and_is_learned():
+    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.1, None, "state_independent")
+    obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
+    with torch.no_grad():
+        scale = actor(obs)["vessel", "scale"]
+    torch.testing.assert_close(scale, torch.full((64, 3, 2), 0.1))
+    learned = [name for name, p in actor.named_parameters() if "state_independent_scale" in name]
+    assert len(learned) == 1  # one log-deviation per action entry, trained with the policy
 
 
 def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_its_bias():

@@ -28,6 +28,7 @@ nest; unknown keys and bad values are refused by name):
 | ``hidden`` | hidden layer sizes of the policy and the critic | ``[64, 64]`` |
 | ``distribution`` | ``tanh_normal`` (TorchRL's recipe) or ``normal`` (SB3's; the env clips) | ``tanh_normal`` |
 | ``initial_scale`` | the Gaussian's standard deviation where the network's scale output is 0 (at the start) | 1.0 |
+| ``scale`` | ``state_dependent`` (a network output) or ``state_independent`` (learned, SB3's) | ``state_dependent`` |
 | ``action_head_gain`` | scale the last layer's initial weights by this and zero its bias (SB3: 0.01), or null | null |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
 | ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
@@ -164,6 +165,7 @@ DEFAULTS: dict[str, Any] = {
     "hidden": [64, 64],
     "distribution": "tanh_normal",
     "initial_scale": 1.0,
+    "scale": "state_dependent",
     "action_head_gain": None,
     "lr": 3e-4,
     "lr_schedule": "constant",
@@ -187,6 +189,7 @@ DEFAULTS: dict[str, Any] = {
 ALGOS = ("mappo", "ippo")
 LR_SCHEDULES = ("constant", "linear")
 DISTRIBUTIONS = ("tanh_normal", "normal")
+SCALES = ("state_dependent", "state_independent")
 POLICY_FILE = "policy.pt"
 #: Seconds of training between the intermediate saves of ``policy.pt`` and ``progress.csv``.
 SAVE_SECONDS = 60.0
@@ -214,6 +217,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
+    if cfg["scale"] not in SCALES:
+        raise TrainConfigError(f"scale must be one of {list(SCALES)}, got {cfg['scale']!r}")
     if cfg["distribution"] not in DISTRIBUTIONS:
         raise TrainConfigError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {cfg['distribution']!r}")
     if cfg["lr_schedule"] not in LR_SCHEDULES:
@@ -364,6 +369,7 @@ def _policy_network(
     distribution: str = "tanh_normal",
     initial_scale: float = 1.0,
     action_head_gain: float | None = None,
+    scale: str = "state_dependent",
 ) -> Any:
     """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution.
 
@@ -372,9 +378,14 @@ def _policy_network(
     With ``action_head_gain`` the MLP's last layer starts with its weights scaled by it and a zero bias, so the
     first actions' means are near 0 and their deviations near ``initial_scale`` (SB3 initializes its action
     layer with gain 0.01; TorchRL's default leaves means of about ±0.1 and more on unscaled observations).
+    With ``scale="state_independent"`` the network outputs the means only and the deviation is one learned
+    parameter per action entry, ``exp`` of a log-deviation that starts at ``log(initial_scale)`` (SB3's Gaussian,
+    TensorDict's ``AddStateIndependentNormalScale``).
     """
+    import math
+
     import torch
-    from tensordict.nn import NormalParamExtractor, TensorDictModule
+    from tensordict.nn import AddStateIndependentNormalScale, NormalParamExtractor, TensorDictModule
     from torch import nn
     from torchrl.modules import IndependentNormal, MultiAgentMLP, ProbabilisticActor, TanhNormal
 
@@ -382,14 +393,18 @@ def _policy_network(
         *([running_norm(obs_dim)] if normalize else []),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
-            n_agent_outputs=2 * action_dim,
+            n_agent_outputs=action_dim if scale == "state_independent" else 2 * action_dim,
             n_agents=n_agents,
             centralized=False,
             share_params=True,
             num_cells=hidden,
             activation_class=nn.Tanh,
         ),
-        NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}"),
+        (
+            AddStateIndependentNormalScale(action_dim, scale_mapping="exp", init_value=math.log(initial_scale))
+            if scale == "state_independent"
+            else NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}")
+        ),
     )
     if action_head_gain is not None:
         *_, weight, bias = net[-2].parameters()  # the MultiAgentMLP's output layer
@@ -459,7 +474,8 @@ class TorchPolicy:
         # every vessel is one batch entry of a one-agent MLP (the weights are shared: any team size)
         flat = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, 1, obs.shape[-1]))
         with torch.no_grad():
-            loc, _ = self.trunk(flat).chunk(2, dim=-1)
+            # the means are the first A outputs (then the scale's, unless the scale is state-independent)
+            loc = self.trunk(flat)[..., : self.action_dim]
         action = torch.tanh(loc) if self.distribution == "tanh_normal" else loc.clamp(-1.0, 1.0)
         return np.asarray(action.numpy(), dtype=np.float32).reshape(*obs.shape[:-1], self.action_dim)
 
@@ -490,9 +506,10 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         normalize = bool(saved.get("normalize_observations", False))
         distribution = str(saved.get("distribution", "tanh_normal"))
         config = json.loads(saved["config"])
-        scale = float(config.get("initial_scale", 1.0))  # runs saved before the key trained with 1.0
+        # runs saved before these keys trained with their defaults
+        initial, kind = float(config.get("initial_scale", 1.0)), str(config.get("scale", "state_dependent"))
         sizes = int(dims["observation"]), int(dims["action"])
-        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, scale)
+        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind)
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
@@ -538,7 +555,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
-    exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"]
+    exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"]
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration)
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     scale = initial_spread(cfg, 0.0, 0)
