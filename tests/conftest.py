@@ -24,3 +24,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
+
+
+def record_calls(monkeypatch: pytest.MonkeyPatch, cls: type, name: str) -> list:
+    """Wrap the method ``cls.name`` (for this test) so that it still runs and records its one argument per call."""
+    calls: list = []
+    original = getattr(cls, name)
+
+    def recorded(self, value):
+        calls.append(value)
+        return original(self, value)
+
+    monkeypatch.setattr(cls, name, recorded)
+    return calls

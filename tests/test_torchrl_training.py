@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import record_calls
 
 torch = pytest.importorskip("torch")
 pytest.importorskip("torchrl")
@@ -276,14 +277,7 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
 def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp_path, monkeypatch):
     from marine_formation_env.torchrl import MarineFormationTorchEnv
 
-    scales: list[float] = []
-    original = MarineFormationTorchEnv.set_initial_spread
-
-    def record(self, scale):
-        scales.append(scale)
-        original(self, scale)
-
-    monkeypatch.setattr(MarineFormationTorchEnv, "set_initial_spread", record)
+    scales = record_calls(monkeypatch, MarineFormationTorchEnv, "set_initial_spread")
     out = tmp_path / "run"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
     for item in [*TINY, "initial_state_curriculum={'start': 0.2, 'until': 1.0}"]:

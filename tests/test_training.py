@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import record_calls
 
 pytest.importorskip("stable_baselines3")
 import torch
@@ -605,14 +606,7 @@ def test_a_zero_spread_starts_every_formation_in_formation_on_its_lanes():
 
 
 def test_sb3_training_follows_the_curriculum_over_its_budget(tmp_path, monkeypatch):
-    spreads: list[float] = []
-    original = SharedPolicyVecEnv.set_initial_spread
-
-    def record(self, scale):
-        spreads.append(scale)
-        original(self, scale)
-
-    monkeypatch.setattr(SharedPolicyVecEnv, "set_initial_spread", record)
+    spreads = record_calls(monkeypatch, SharedPolicyVecEnv, "set_initial_spread")
     args = [*SMOKE_ARGS, "--set", "n_timesteps=768", "--set", "eval_freq=0", "--set", "checkpoint_freq=0"]
     args += ["--set", "initial_state_curriculum={'start': 0.2, 'until': 1.0}", "--out", str(tmp_path / "run")]
     assert train_module.main(args) == 0
