@@ -23,6 +23,7 @@ from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from marine_formation_env.env import parallel_env
 from training import run_folder
+from training.config import curriculum_spread
 from training.learned import ModelPolicy, load_learned_policy
 
 __all__ = [
@@ -303,12 +304,9 @@ class InitialStateCurriculum(BaseCallback):
         self.total_steps = max(1, int(total_steps))
         self.seconds = seconds
         self.start = time.perf_counter()
-        self.spreads: list[float] = []  # the spread set before each rollout
 
     def spread(self) -> float:
         """The spread for the next rollout."""
-        from training.config import curriculum_spread
-
         used = self.num_timesteps / self.total_steps
         if self.seconds is not None:
             used = max(used, (time.perf_counter() - self.start) / self.seconds)
@@ -321,7 +319,6 @@ class InitialStateCurriculum(BaseCallback):
         scale = self.spread()
         env: Any = self.training_env.unwrapped  # SharedPolicyVecEnv or TeamsVecEnv
         env.set_initial_spread(scale)
-        self.spreads.append(scale)
 
     def _on_step(self) -> bool:
         return True
