@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, report_error
 from marine_formation_env.core import FormationCore
@@ -106,7 +107,7 @@ def _scales(text: str) -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m benchmarks.exploration", description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paper", choices=sorted(SCENARIOS))
-    parser.add_argument("--level", default="force", choices=["force", "guidance", "speed"])
+    parser.add_argument("--level", default="force", choices=list(ACTION_LEVELS))
     parser.add_argument("--scales", default="1,0.3,0.1", help="action deviations to try (default 1,0.3,0.1)")
     parser.add_argument("--spread", type=float, default=1.0, help="initial-state spread in [0, 1] (default 1)")
     parser.add_argument("--formations", type=int_at_least(1), default=32, help="formations per deviation (default 32)")
