@@ -34,7 +34,15 @@ from stable_baselines3.common.vec_env.util import check_for_nested_spaces, obs_s
 import marine_formation_env
 from baselines.reference import ReferencePolicy
 from training import train as train_module
-from training.config import TrainConfigError, algo_class, algo_kwargs, apply_overrides, load_config, validate
+from training.config import (
+    TrainConfigError,
+    algo_class,
+    algo_kwargs,
+    apply_overrides,
+    budget_fraction,
+    load_config,
+    validate,
+)
 from training.learned import ModelPolicy, load_learned_policy
 from training.vec_env import SharedPolicyVecEnv
 
@@ -310,6 +318,19 @@ def test_learning_rate_schedule():
     assert schedule(1.0) == pytest.approx(3e-4)
     assert schedule(0.5) == pytest.approx(1.5e-4)
     assert schedule(0.0) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("done", "elapsed", "seconds", "expected"),
+    [
+        (250, 10.0, None, 0.25),  # no clock: steps only
+        (250, 10.0, 100.0, 0.25),  # the steps run out first
+        (250, 60.0, 100.0, 0.6),  # the clock runs out first
+        (1500, 0.0, 100.0, 1.5),  # not capped: the last rollout may pass the budget
+    ],
+)
+def test_the_budget_spent_is_whichever_part_runs_out_first(done, elapsed, seconds, expected):
+    assert budget_fraction(done, 1000, elapsed, seconds) == pytest.approx(expected)
 
 
 def test_activation_names_become_torch_modules():

@@ -23,7 +23,7 @@ from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from marine_formation_env.env import parallel_env
 from training import run_folder
-from training.config import curriculum_spread
+from training.config import budget_fraction, curriculum_spread
 from training.learned import ModelPolicy, load_learned_policy
 
 __all__ = [
@@ -307,9 +307,7 @@ class InitialStateCurriculum(BaseCallback):
 
     def spread(self) -> float:
         """The spread for the next rollout."""
-        used = self.num_timesteps / self.total_steps
-        if self.seconds is not None:
-            used = max(used, (time.perf_counter() - self.start) / self.seconds)
+        used = budget_fraction(self.num_timesteps, self.total_steps, time.perf_counter() - self.start, self.seconds)
         return curriculum_spread(self.curriculum, used)
 
     def _on_training_start(self) -> None:

@@ -283,6 +283,18 @@ def check_curriculum(value: Any) -> dict[str, float] | None:
     return {"start": start, "until": until}
 
 
+def budget_fraction(done: float, total: float, elapsed: float, seconds: float | None) -> float:
+    """The fraction of a budget spent, whichever of its two parts runs out first.
+
+    ``max(done / total, elapsed / seconds)``: steps or frames ``done`` of ``total``, and wall-clock
+    ``elapsed`` of ``seconds`` (None: steps only). Not capped at 1.
+    """
+    used = done / total
+    if seconds is not None:
+        used = max(used, elapsed / seconds)
+    return float(used)
+
+
 def curriculum_spread(curriculum: dict[str, float] | None, used: float) -> float:
     """The initial-state spread once the fraction ``used`` of the budget is spent (no curriculum: 1)."""
     if curriculum is None:

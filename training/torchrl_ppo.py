@@ -132,6 +132,7 @@ from training.config import (
     _positive,
     _whole,
     add_run_arguments,
+    budget_fraction,
     check_curriculum,
     check_train_reward,
     config_from_arguments,
@@ -660,10 +661,8 @@ def budget_used(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
 
     ``minutes`` null: frames only. Not capped (the last iteration may pass 1).
     """
-    used = frames / cfg["total_frames"]
-    if cfg["minutes"] is not None:
-        used = max(used, elapsed / (60.0 * cfg["minutes"]))
-    return used
+    seconds = None if cfg["minutes"] is None else 60.0 * cfg["minutes"]
+    return budget_fraction(frames, cfg["total_frames"], elapsed, seconds)
 
 
 def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
