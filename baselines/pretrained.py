@@ -396,6 +396,10 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     params = mlp.params
     weights = [params[k, "weight"].detach().double().numpy().T.copy() for k in indices]
     biases = [params[k, "bias"].detach().double().numpy().copy() for k in indices]
+    # the action units (action_scale) multiply the means, the last layer's first A outputs: fold them in
+    units = policy.action_scale.astype(np.float64)
+    weights[-1][:, : policy.action_dim] *= units
+    biases[-1][: policy.action_dim] *= units
     squash = "tanh" if policy.distribution == "tanh_normal" else "clip"
     return MLPPolicy(weights, biases, mean, std, clip, squash, policy.action_dim), config
 

@@ -16,6 +16,13 @@ envelope within seconds, so a learner's early episodes are too short to teach
 it anything. ``--spread`` starts the formations that fraction of the way from
 their lanes to the scenario's initial state (as the trainers' curriculum over
 the initial state does; 1 = the scenario's own).
+
+``--reference`` also reports how much of each actuator's range the paper's
+controller uses (|a| per action entry over the episodes of ``--formations``
+seeds, over the whole episode and after ``--after`` seconds), the yardstick for
+a learner's ``initial_scale`` and ``action_scale``::
+
+    python -m benchmarks.exploration --level force --scales 0.1 --reference --formations 10
 """
 
 from __future__ import annotations
@@ -36,10 +43,12 @@ from marine_formation_env.frontend import InitialStates
 from marine_formation_env.rules import outside_workspace
 from marine_formation_env.scenarios import SCENARIOS, make_config
 
+#: The action entries of each level, in order (for the reference's table).
+ACTION_ENTRIES = {"force": ("tau_u", "tau_r"), "guidance": ("speed", "heading"), "speed": ("speed",)}
 #: What ended a formation, checked in this order on its last state.
 CAUSES = ("yaw_rate", "speed", "workspace", "collision")
 
-__all__ = ["lifetimes", "main"]
+__all__ = ["lifetimes", "main", "reference_actions"]
 
 
 def lifetimes(
@@ -82,6 +91,32 @@ def lifetimes(
     }
 
 
+def reference_actions(scenario: str, level: str, seeds: list[int], after: float) -> dict[str, Any]:
+    """How much of each actuator's range the reference uses: quantiles of |a| per action entry.
+
+    Runs :class:`~baselines.reference.ReferencePolicy` for one episode per seed and returns, per entry (a list
+    of ``action_dim``), ``max``, ``p99`` and ``median`` of |a| over every vessel and control period, and
+    ``max_after``: the largest |a| after ``after`` seconds. The actions are those the env applied (clipped).
+    """
+    from baselines.engine import evaluate_episodes
+    from baselines.reference import ReferencePolicy
+
+    config = make_config(scenario, action_level=level)
+    if not 0.0 <= after < config.horizon:
+        raise ValueError(f"after must lie in [0, horizon = {config.horizon:g}) s, got {after!r}")
+    runs = evaluate_episodes(ReferencePolicy(config), config, seeds)
+    size = np.abs(np.concatenate([run.actions.reshape(-1, config.action_dim) for run in runs]))
+    late = np.abs(np.concatenate([run.actions[run.t[:-1] >= after].reshape(-1, config.action_dim) for run in runs]))
+    return {
+        "max": size.max(axis=0).tolist(),
+        "p99": np.quantile(size, 0.99, axis=0).tolist(),
+        "median": np.median(size, axis=0).tolist(),
+        "max_after": late.max(axis=0).tolist(),
+        "after": after,
+        "seeds": seeds,
+    }
+
+
 def _cause(config: Any, state: np.ndarray) -> str:
     """Which bound a terminated formation's last state ``(N, 6)`` broke, the first of :data:`CAUSES` that holds."""
     if np.any(np.abs(state[:, R]) > config.max_yaw_rate):
@@ -113,6 +148,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--formations", type=int_at_least(1), default=32, help="formations per deviation (default 32)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="also write the lifetimes here")
+    parser.add_argument(
+        "--reference", action="store_true", help="also report the reference's |a| on --formations seeds from --seed"
+    )
+    parser.add_argument("--after", type=float, default=60.0, help="--reference: also |a| after this time [s]")
     args = parser.parse_args(argv)
     if not 0.0 <= args.spread <= 1.0:
         parser.error(f"--spread must lie in [0, 1], got {args.spread}")
@@ -134,8 +173,28 @@ def main(argv: list[str] | None = None) -> int:
             f"| {r['scale']:g} | {np.median(seconds):.1f} | {np.quantile(seconds, 0.1):.1f} | "
             f"{np.quantile(seconds, 0.9):.1f} | {np.mean(seconds >= r['horizon']):.0%} | {causes} |"
         )
+    used = None
+    if args.reference:
+        try:
+            used = reference_actions(args.scenario, args.level, list(range(args.seed, args.seed + args.formations)),
+                                     args.after)  # fmt: skip
+        except ValueError as err:
+            report_error(parser.prog, str(err))
+        entries = ACTION_ENTRIES[args.level]
+        print(f"\nthe reference's |a| over {args.formations} episodes, {args.scenario}, {args.level} level")
+        print(f"| statistic | {' | '.join(entries)} |")
+        print("|---|" + "---|" * len(used["max"]))
+        for key, label in (
+            ("max", "max"),
+            ("p99", "99 %"),
+            ("median", "median"),
+            ("max_after", f"max after {args.after:g} s"),
+        ):
+            print(f"| {label} | " + " | ".join(f"{v:.4g}" for v in used[key]) + " |")
     if args.json is not None:
         report = {"command": " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])]), "runs": results}
+        if used is not None:
+            report["reference"] = used
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
     return 0
 

@@ -53,6 +53,20 @@ def test_each_ended_formation_is_charged_to_the_bound_its_last_state_breaks():
     assert exploration._cause(config, state) == "workspace"
 
 
+def test_the_reference_s_late_actions_are_the_model_s_steady_state_on_a_straight_path():
+    # once the formation sails its lanes at u = u_d (constant here), v = r = 0: the surge acceleration must only
+    # balance the linear damping, tau_u = d11/m11 * u_d, and the yaw acceleration must vanish
+    config = make_config("paper", action_level="force")
+    assert config.u_d.amplitude == 0.0
+    steady = config.vessel.d11 / config.vessel.m11 * config.u_d.mean / config.tau_u_max
+    used = exploration.reference_actions("paper", "force", [0, 1], after=200.0)
+    assert used["max_after"][0] == pytest.approx(steady, rel=1e-3)  # the consensus term has died out
+    assert used["max_after"][1] < 1e-5
+    assert used["max"][0] > 10 * steady  # the first seconds use much more of the range
+    with pytest.raises(ValueError, match="after must lie in"):
+        exploration.reference_actions("paper", "force", [0], after=400.0)
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [

@@ -177,10 +177,15 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("distribution", "scale"),
-    [("tanh_normal", "state_dependent"), ("normal", "state_dependent"), ("normal", "state_independent")],
+    ("distribution", "scale", "action_scale"),
+    [
+        ("tanh_normal", "state_dependent", 1.0),
+        ("normal", "state_dependent", 1.0),
+        ("normal", "state_independent", 1.0),
+        ("normal", "state_dependent", 0.05),  # the action units are folded into the last layer's means
+    ],
 )
-def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path, distribution, scale):
+def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path, distribution, scale, action_scale):
     pytest.importorskip("torchrl")
     from training.torchrl_ppo import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main
@@ -189,7 +194,8 @@ def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path
     argv = ["--out", str(run), "--no-progress"]
     for item in ["num_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "epochs=1",
                  "eval_episodes=1", "hidden=[16, 16]", "env_kwargs.horizon=4.0", "env_kwargs.action_level=speed",
-                 "normalize_observations=true", f"distribution={distribution}", f"scale={scale}"]:  # fmt: skip
+                 "normalize_observations=true", f"distribution={distribution}", f"scale={scale}",
+                 f"action_scale={action_scale}"]:  # fmt: skip
         argv += ["--set", item]
     assert torchrl_main(argv) == 0
     export_run(run, "torchrl_tiny", "smoke", tmp_path / "shipped")

@@ -43,16 +43,17 @@ TINY = [
 
 
 @pytest.mark.parametrize(
-    ("algo", "distribution", "scale"),
+    ("algo", "distribution", "scale", "action_scale"),
     [
-        ("mappo", "tanh_normal", "state_dependent"),
-        ("ippo", "tanh_normal", "state_dependent"),
-        ("mappo", "normal", "state_dependent"),
-        ("mappo", "normal", "state_independent"),
+        ("mappo", "tanh_normal", "state_dependent", 1.0),
+        ("ippo", "tanh_normal", "state_dependent", 1.0),
+        ("mappo", "normal", "state_dependent", 1.0),
+        ("mappo", "normal", "state_independent", 1.0),
+        ("mappo", "normal", "state_independent", 0.05),
     ],
 )
 def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_deterministic_actor(
-    tmp_path, algo, distribution, scale
+    tmp_path, algo, distribution, scale, action_scale
 ):
     out = tmp_path / algo
     args = [
@@ -68,6 +69,8 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         "--set",
         f"scale={scale}",
         "--set",
+        f"action_scale={action_scale}",
+        "--set",
         "env_kwargs.action_level=speed",
     ]
     for item in TINY:
@@ -82,6 +85,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     assert summary["reference_return"] < 0
     policy, config = load_torch_policy(out)
     assert config["algo"] == algo and config["seed"] == 3 and config["scale"] == scale
+    assert config["action_scale"] == action_scale
     obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
     mine = policy.act_batch(obs)
     assert mine.shape == (6, 3, 1) and np.all(np.abs(mine) <= 1.0)
@@ -154,6 +158,10 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
         ("scale=fixed", "scale must be one of ['state_dependent', 'state_independent'], got 'fixed'"),
         ("action_head_gain=-1", "action_head_gain must be > 0, got -1"),
+        ("action_scale=0", "action_scale entries must be numbers in (0, 1], got 0"),
+        ("action_scale=[2]", "action_scale entries must be numbers in (0, 1], got [2]"),
+        ("action_scale=[0.1, 0.2, 0.3]", "action_scale has 3 entries, the action has"),
+        ("action_scale=0.5", "action_scale 0.5 needs distribution: normal"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
         ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
@@ -327,6 +335,24 @@ def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_i
         loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
     torch.testing.assert_close(loc_small, 0.01 * (loc_plain - bias[:2]))
     assert float(loc_small.abs().max()) < 0.05  # the first actions' means are near 0 on any observation
+
+
+def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units():
+    # the same seed builds the same network; the scaled actor's mean and deviation are k times the plain one's,
+    # per action entry, and nothing of it is learned
+    obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
+    k = torch.tensor([0.2, 0.05])
+    torch.manual_seed(5)
+    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent")
+    torch.manual_seed(5)
+    scaled = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent", [0.2, 0.05])
+    with torch.no_grad():
+        a, b = plain(obs.clone()), scaled(obs.clone())
+    torch.testing.assert_close(b["vessel", "loc"], k * a["vessel", "loc"])
+    torch.testing.assert_close(b["vessel", "scale"], torch.tensor([0.3 * 0.2, 0.3 * 0.05]).expand(64, 3, 2))
+    assert [n for n, _ in scaled.named_parameters()] == [n for n, _ in plain.named_parameters()]
+    with pytest.raises(ValueError, match="needs distribution 'normal'"):
+        trainer._policy_network(7, 2, 3, [16], False, "tanh_normal", 0.3, None, "state_dependent", 0.5)
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

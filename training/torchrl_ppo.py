@@ -30,6 +30,7 @@ nest; unknown keys and bad values are refused by name):
 | ``initial_scale`` | the Gaussian's standard deviation where the network's scale output is 0 (at the start) | 1.0 |
 | ``scale`` | ``state_dependent`` (a network output) or ``state_independent`` (learned, SB3's) | ``state_dependent`` |
 | ``action_head_gain`` | scale the last layer's initial weights by this and zero its bias (SB3: 0.01), or null | null |
+| ``action_scale`` | the env gets this × the policy's sample (one per action entry, or one for all; below) | 1.0 |
 | ``lr``, ``max_grad_norm`` | Adam learning rate, gradient clipping | 3e-4, 1.0 |
 | ``lr_schedule`` | ``constant``, or ``linear``: the rate falls linearly to 0 over the run's budget | ``constant`` |
 | ``target_kl`` | stop an iteration's epochs once a minibatch's approximate KL exceeds 1.5 × this, or null | null |
@@ -49,6 +50,18 @@ approximate KL of 1–5 per iteration even with the learning rate at 0.
 ``normal`` is SB3's choice: an unbounded Gaussian whose samples the env
 clips to [−1, 1] (the env clips every action), with exact log-probabilities;
 the deterministic action is then the mean clipped to [−1, 1].
+
+``action_scale`` rescales the policy's action space, on the learner's side:
+the network's Gaussian (mean and deviation, and ``initial_scale`` with them)
+is over ``z`` and the env receives ``action_scale × z`` (per action entry).
+The env, its action space and the evaluation are unchanged, and no action is
+out of reach (the Gaussian is unbounded; the env clips at ±1 as always): a
+network output of 1 now commands ``action_scale`` of the actuator's range.
+It is for levels whose useful actions are a small part of the range: at
+``force`` the reference's yaw accelerations stay below 0.0004 of the limit
+after the first minute (docs/training.md), while an unscaled network's means
+of about ±0.01 after its first minute of training were enough to spin
+vessels out of the workspace within a minute.
 
 The three normalizations are SB3's (``VecNormalize`` and PPO's advantage
 standardization), done on the learner's side: ``normalize_observations``
@@ -168,6 +181,7 @@ DEFAULTS: dict[str, Any] = {
     "initial_scale": 1.0,
     "scale": "state_dependent",
     "action_head_gain": None,
+    "action_scale": 1.0,
     "lr": 3e-4,
     "lr_schedule": "constant",
     "target_kl": None,
@@ -231,6 +245,11 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     if cfg["action_head_gain"] is not None:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
+    cfg["action_scale"] = _action_scale(cfg["action_scale"], cfg["scenario"], cfg["env_kwargs"])
+    if cfg["action_scale"] != 1.0 and cfg["distribution"] != "normal":
+        raise TrainConfigError(
+            f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
+        )
     if cfg["frames_per_batch"] % cfg["num_envs"]:
         raise TrainConfigError(
             f"frames_per_batch = {cfg['frames_per_batch']} must be a multiple of num_envs = {cfg['num_envs']}"
@@ -248,6 +267,26 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
     return cfg
+
+
+def _action_scale(value: Any, scenario: Any, env_kwargs: dict[str, Any]) -> float | list[float]:
+    """``action_scale``: one number in (0, 1] or a list of them, one per action entry of the scenario's level."""
+    from marine_formation_env.scenarios import make_config
+
+    def entry(x: Any) -> float:
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not 0.0 < float(x) <= 1.0:
+            raise TrainConfigError(f"action_scale entries must be numbers in (0, 1], got {value!r}")
+        return float(x)
+
+    if not isinstance(value, list):
+        return entry(value)
+    try:
+        size = make_config(scenario, **env_kwargs).action_dim
+    except (ValueError, TypeError):
+        size = len(value)  # the scenario's own error is raised by resolve()
+    if len(value) != size:
+        raise TrainConfigError(f"action_scale has {len(value)} entries, the action has {size}: got {value!r}")
+    return [entry(x) for x in value]
 
 
 # ----------------------------------------------------------------------------- networks
@@ -371,6 +410,7 @@ def _policy_network(
     initial_scale: float = 1.0,
     action_head_gain: float | None = None,
     scale: str = "state_dependent",
+    action_scale: float | Sequence[float] = 1.0,
 ) -> Any:
     """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution.
 
@@ -382,6 +422,8 @@ def _policy_network(
     With ``scale="state_independent"`` the network outputs the means only and the deviation is one learned
     parameter per action entry, ``exp`` of a log-deviation that starts at ``log(initial_scale)`` (SB3's Gaussian,
     TensorDict's ``AddStateIndependentNormalScale``).
+    With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
+    the Gaussian over the network's units becomes one over the env's (module docstring).
     """
     import math
 
@@ -390,6 +432,9 @@ def _policy_network(
     from torch import nn
     from torchrl.modules import IndependentNormal, MultiAgentMLP, ProbabilisticActor, TanhNormal
 
+    units = _scale_vector(action_scale, action_dim)
+    if units is not None and distribution != "normal":
+        raise ValueError(f"action_scale {action_scale!r} needs distribution 'normal' (tanh squashes before scaling)")
     net = nn.Sequential(
         *([running_norm(obs_dim)] if normalize else []),
         MultiAgentMLP(
@@ -406,9 +451,10 @@ def _policy_network(
             if scale == "state_independent"
             else NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}")
         ),
+        *([] if units is None else [_action_units(units)]),
     )
     if action_head_gain is not None:
-        *_, weight, bias = net[-2].parameters()  # the MultiAgentMLP's output layer
+        *_, weight, bias = _shared_trunk_of(net)[-1].parameters()  # the MultiAgentMLP's output layer
         with torch.no_grad():
             weight.mul_(action_head_gain)
             bias.zero_()
@@ -429,6 +475,31 @@ def _policy_network(
         return_log_prob=True,
         **kind,
     )
+
+
+def _scale_vector(action_scale: float | Sequence[float], action_dim: int) -> np.ndarray | None:
+    """``action_scale`` as ``(action_dim,)`` float32, or None where it is 1 everywhere (no rescaling)."""
+    vector = np.broadcast_to(np.asarray(action_scale, dtype=np.float32), (action_dim,)).copy()
+    return None if np.all(vector == 1.0) else vector
+
+
+def _action_units(units: np.ndarray) -> Any:
+    """The module ``(loc, scale) ↦ (k·loc, k·scale)`` with the fixed ``k = units`` (a buffer, not learned)."""
+    import torch
+    from torch import nn
+
+    class ActionUnits(nn.Module):
+        k: torch.Tensor
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.register_buffer("k", torch.as_tensor(units))
+
+        def forward(self, pair: tuple[torch.Tensor, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+            loc, scale = pair
+            return loc * self.k, scale * self.k
+
+    return ActionUnits()
 
 
 def _critic_network(obs_dim: int, n_agents: int, hidden: list[int], centralized: bool, normalize: bool) -> Any:
@@ -462,12 +533,21 @@ class TorchPolicy:
         observation_dim, action_dim: the sizes it was trained with.
     """
 
-    def __init__(self, actor: Any, observation_dim: int, action_dim: int, distribution: str = "tanh_normal") -> None:
+    def __init__(
+        self,
+        actor: Any,
+        observation_dim: int,
+        action_dim: int,
+        distribution: str = "tanh_normal",
+        action_scale: float | Sequence[float] = 1.0,
+    ) -> None:
         self.actor = actor
         self.trunk = _shared_trunk(actor)
         self.observation_dim = observation_dim
         self.action_dim = action_dim
         self.distribution = distribution
+        #: ``(action_dim,)``: the env's action per unit of the network's mean (``action_scale``)
+        self.action_scale = np.broadcast_to(np.asarray(action_scale, dtype=np.float32), (action_dim,)).copy()
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         import torch
@@ -476,7 +556,7 @@ class TorchPolicy:
         flat = torch.as_tensor(np.asarray(obs, dtype=np.float32).reshape(-1, 1, obs.shape[-1]))
         with torch.no_grad():
             # the means are the first A outputs (then the scale's, unless the scale is state-independent)
-            loc = self.trunk(flat)[..., : self.action_dim]
+            loc = self.trunk(flat)[..., : self.action_dim] * torch.as_tensor(self.action_scale)
         action = torch.tanh(loc) if self.distribution == "tanh_normal" else loc.clamp(-1.0, 1.0)
         return np.asarray(action.numpy(), dtype=np.float32).reshape(*obs.shape[:-1], self.action_dim)
 
@@ -509,24 +589,30 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         config = json.loads(saved["config"])
         # runs saved before these keys trained with their defaults
         initial, kind = float(config.get("initial_scale", 1.0)), str(config.get("scale", "state_dependent"))
+        units = config.get("action_scale", 1.0)
         sizes = int(dims["observation"]), int(dims["action"])
-        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind)
+        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind, units)
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
-    return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution), config
+    return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution, units), config
 
 
 def _shared_trunk(actor: Any) -> Any:
-    """The observation → (loc, scale) network of an actor built by :func:`_policy_network`: its running norm
-    (if any) and its ``MultiAgentMLP``, without the ``NormalParamExtractor``."""
+    """The observation → network-output part of an actor built by :func:`_policy_network`: its running norm
+    (if any) and its ``MultiAgentMLP``, without the ``NormalParamExtractor`` (and the action units, if any)."""
+    return _shared_trunk_of(actor.module[0].module)
+
+
+def _shared_trunk_of(net: Any) -> Any:
+    """The modules of :func:`_policy_network`'s ``nn.Sequential`` up to and including its ``MultiAgentMLP``."""
     from torchrl.modules import MultiAgentMLP
 
-    net = actor.module[0].module
-    mlp = net[-2]
-    if not isinstance(mlp, MultiAgentMLP):
-        raise ValueError(f"not an actor of training.torchrl_ppo: found {type(mlp).__name__} where its MLP should be")
-    return net[:-1]
+    found = [k for k, module in enumerate(net) if isinstance(module, MultiAgentMLP)]
+    if len(found) != 1:
+        kinds = [type(module).__name__ for module in net]
+        raise ValueError(f"not an actor of training.torchrl_ppo: expected one MultiAgentMLP, found {kinds}")
+    return net[: found[0] + 1]
 
 
 # ----------------------------------------------------------------------------- training
@@ -556,7 +642,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     normalize = cfg["normalize_observations"]
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
-    exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"]
+    exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"], cfg["action_scale"]
     actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration)
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
     scale = initial_spread(cfg, 0.0, 0)
