@@ -120,8 +120,11 @@ class MLPPolicy(BatchPolicy):
     """A deterministic tanh MLP over one vessel's observation (every vessel, shared weights).
 
     Args:
-        weights, biases: layer ``k`` maps ``x ↦ x @ weights[k] + biases[k]``; tanh between layers.
-        mean, std, clip: the observation normalization ``clip((obs − mean) / std, ±clip)``.
+        weights: layer ``k`` maps ``x ↦ x @ weights[k] + biases[k]``; tanh between layers.
+        biases: the layers' biases (above).
+        mean: the observation normalization ``clip((obs − mean) / std, ±clip)``: its mean,
+        std: its deviation,
+        clip: and its bound.
         squash: ``clip`` (to [−1, 1]) or ``tanh``, applied to the first ``action_dim`` outputs.
         features: the weights of :func:`slot_features` (a ``slots`` network: any number of slots), or None.
     """
