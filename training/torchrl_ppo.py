@@ -246,7 +246,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
     cfg["action_scale"] = _action_scale(cfg["action_scale"], cfg["scenario"], cfg["env_kwargs"])
-    if cfg["action_scale"] != 1.0 and cfg["distribution"] != "normal":
+    if np.any(np.asarray(cfg["action_scale"]) != 1.0) and cfg["distribution"] != "normal":
         raise TrainConfigError(
             f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
         )
@@ -433,7 +433,8 @@ def _policy_network(
     from torchrl.modules import IndependentNormal, MultiAgentMLP, ProbabilisticActor, TanhNormal
 
     units = _scale_vector(action_scale, action_dim)
-    if units is not None and distribution != "normal":
+    rescaled = not np.all(units == 1.0)
+    if rescaled and distribution != "normal":
         raise ValueError(f"action_scale {action_scale!r} needs distribution 'normal' (tanh squashes before scaling)")
     net = nn.Sequential(
         *([running_norm(obs_dim)] if normalize else []),
@@ -451,7 +452,7 @@ def _policy_network(
             if scale == "state_independent"
             else NormalParamExtractor(scale_mapping=f"biased_softplus_{initial_scale}")
         ),
-        *([] if units is None else [_action_units(units)]),
+        *([_action_units(units)] if rescaled else []),
     )
     if action_head_gain is not None:
         *_, weight, bias = _shared_trunk_of(net)[-1].parameters()  # the MultiAgentMLP's output layer
@@ -477,10 +478,9 @@ def _policy_network(
     )
 
 
-def _scale_vector(action_scale: float | Sequence[float], action_dim: int) -> np.ndarray | None:
-    """``action_scale`` as ``(action_dim,)`` float32, or None where it is 1 everywhere (no rescaling)."""
-    vector = np.broadcast_to(np.asarray(action_scale, dtype=np.float32), (action_dim,)).copy()
-    return None if np.all(vector == 1.0) else vector
+def _scale_vector(action_scale: float | Sequence[float], action_dim: int) -> np.ndarray:
+    """``action_scale`` as ``(action_dim,)`` float32 (one number: the same for every entry)."""
+    return np.broadcast_to(np.asarray(action_scale, dtype=np.float32), (action_dim,)).copy()
 
 
 def _action_units(units: np.ndarray) -> Any:
@@ -547,7 +547,7 @@ class TorchPolicy:
         self.action_dim = action_dim
         self.distribution = distribution
         #: ``(action_dim,)``: the env's action per unit of the network's mean (``action_scale``)
-        self.action_scale = np.broadcast_to(np.asarray(action_scale, dtype=np.float32), (action_dim,)).copy()
+        self.action_scale = _scale_vector(action_scale, action_dim)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         import torch
