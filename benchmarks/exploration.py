@@ -192,7 +192,8 @@ def main(argv: list[str] | None = None) -> int:
         ):
             print(f"| {label} | " + " | ".join(f"{v:.4g}" for v in used[key]) + " |")
     if args.json is not None:
-        report = {"command": " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])]), "runs": results}
+        command = " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])])
+        report: dict[str, Any] = {"command": command, "runs": results}
         if used is not None:
             report["reference"] = used
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")

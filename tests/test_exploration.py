@@ -74,6 +74,7 @@ def test_the_reference_s_late_actions_are_the_model_s_steady_state_on_a_straight
         (["--scales", "0.1,0"], "--scales must all be > 0, got [0.0]"),
         (["--spread", "2"], "--spread must lie in [0, 1], got 2.0"),
         (["--formations", "0"], "expected a whole number ≥ 1, got 0"),
+        (["--scales", "0.1", "--formations", "1", "--reference", "--after", "500"], "after must lie in [0, horizon"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(capsys, args, message):
@@ -89,3 +90,14 @@ def test_the_table_and_the_json_report_every_deviation(tmp_path, capsys):
     assert [row["scale"] for row in json.loads(out.read_text())["runs"]] == [1.0, 0.5]
     rows = [line.split("|")[1].strip() for line in capsys.readouterr().out.splitlines() if line.startswith("| ")]
     assert rows == ["action deviation", "1", "0.5"]
+
+
+def test_reference_adds_the_reference_s_use_of_each_range_to_the_table_and_the_json(tmp_path, capsys):
+    out = tmp_path / "lifetimes.json"
+    args = ["--scales", "0.1", "--formations", "1", "--reference", "--after", "200", "--json", str(out)]
+    assert exploration.main(args) == 0
+    used = json.loads(out.read_text())["reference"]
+    assert used["seeds"] == [0] and used["after"] == 200.0 and len(used["max_after"]) == 2  # tau_u, tau_r
+    assert all(0.0 <= late <= top <= 1.0 for late, top in zip(used["max_after"], used["max"], strict=True))
+    lines = capsys.readouterr().out.splitlines()
+    assert "| statistic | tau_u | tau_r |" in lines and any(line.startswith("| max after 200 s |") for line in lines)

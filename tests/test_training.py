@@ -16,6 +16,7 @@ import csv
 import inspect
 import json
 import shutil
+import time
 import warnings
 from pathlib import Path
 
@@ -660,3 +661,33 @@ def test_the_curriculum_counts_wall_time_when_the_budget_is_minutes():
     assert callback.spread() == pytest.approx(0.5, abs=0.01)
     callback.start -= 100.0
     assert callback.spread() == 1.0
+
+
+def test_a_linear_learning_rate_falls_over_whichever_budget_runs_out_first():
+    from training.callbacks import BudgetSchedule
+
+    def linear(progress_remaining):
+        return 1e-3 * progress_remaining
+
+    # 60 of 100 s spent: the clock has used more than 10 % of the steps, so the rate is 1e-3 · 0.4
+    schedule = BudgetSchedule(linear, seconds=100.0, start=time.perf_counter() - 60.0)
+    assert schedule(0.9) == pytest.approx(4e-4, abs=1e-6)  # 1 ms of the clock moves it by 1e-8
+    assert schedule(0.2) == pytest.approx(2e-4, abs=1e-6)  # 80 % of the steps used: the steps ran out first
+    assert BudgetSchedule(linear, 100.0, time.perf_counter() - 250.0)(1.0) == 0.0  # past the budget: floored at 0
+    assert BudgetSchedule(lambda _: 3e-4, 100.0, time.perf_counter() - 60.0)(0.9) == 3e-4  # constant stays
+
+
+def test_training_with_minutes_puts_the_learning_rate_on_the_budget_once(tmp_path):
+    from training.callbacks import BudgetSchedule, LearningRateBudget
+
+    resolved = validate({**base_config(), "n_timesteps": 384, "n_envs": 2, "n_steps": 64, "batch_size": 64,
+                         "eval_freq": 0, "checkpoint_freq": 0, "learning_rate": "lin_1e-3"})  # fmt: skip
+    model = train_module.train(resolved, tmp_path / "run", seed=0, progress=False, minutes=10.0)
+    assert isinstance(model.lr_schedule, BudgetSchedule) and model.lr_schedule.seconds == 600.0
+    # one rollout of 2 x 3 x 64 = 384 vessel-steps, in far less than 10 minutes: the steps ran out first,
+    # so the update ran at SB3's own linear rate at progress 0 (all steps used)
+    assert model.lr_schedule(0.0) == 0.0 and model.lr_schedule(1.0) == pytest.approx(1e-3, rel=1e-3)
+    again = LearningRateBudget(60.0)
+    again.model = model
+    again._on_training_start()  # a resumed run: re-wrapped around the original schedule, not nested
+    assert not isinstance(model.lr_schedule.schedule, BudgetSchedule) and model.lr_schedule.seconds == 60.0

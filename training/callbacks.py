@@ -288,6 +288,43 @@ class WallClockBudget(BaseCallback):
         return time.perf_counter() - self.start < self.seconds
 
 
+class BudgetSchedule:
+    """An SB3 schedule (``progress_remaining ↦ value``) that also follows a wall-clock budget.
+
+    ``schedule(1 − used)`` with ``used`` the fraction of the budget spent, whichever of SB3's steps (``1 −
+    progress_remaining``) and ``seconds`` of wall time since ``start`` runs out first
+    (:func:`training.config.budget_fraction`), floored at 0: a ``lin_<x>`` learning rate then reaches 0 at the
+    end of the minutes the learning benchmarks give, as the TorchRL trainer's ``lr_schedule: linear`` does,
+    instead of following an ``n_timesteps`` far beyond what the minutes reach. A constant schedule stays constant.
+    """
+
+    def __init__(self, schedule: Any, seconds: float, start: float) -> None:
+        self.schedule = schedule
+        self.seconds = float(seconds)
+        self.start = float(start)
+
+    def __call__(self, progress_remaining: float) -> float:
+        used = budget_fraction(1.0 - progress_remaining, 1.0, time.perf_counter() - self.start, self.seconds)
+        return float(self.schedule(max(0.0, 1.0 - used)))
+
+
+class LearningRateBudget(BaseCallback):
+    """At the start of training, make the model's learning-rate schedule a :class:`BudgetSchedule` of ``seconds``."""
+
+    def __init__(self, seconds: float) -> None:
+        super().__init__()
+        self.seconds = float(seconds)
+
+    def _on_training_start(self) -> None:
+        base = self.model.lr_schedule
+        if isinstance(base, BudgetSchedule):  # a resumed model saved with one: the budget restarts
+            base = base.schedule
+        self.model.lr_schedule = BudgetSchedule(base, self.seconds, time.perf_counter())
+
+    def _on_step(self) -> bool:
+        return True
+
+
 class InitialStateCurriculum(BaseCallback):
     """A curriculum over the initial state (``initial_state_curriculum``): before each rollout the training env's
     later (auto)resets start ``start + (1 − start) · min(1, used / until)`` of the way from the formation on its

@@ -37,7 +37,8 @@ keep ``env_kwargs``'s reward, the benchmark's.
 Hyperparameter names are checked against the algorithm's constructor, env
 overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
 unknown keys raise :class:`TrainConfigError` naming them. ``learning_rate``
-may be ``lin_<value>`` (linear decay to 0, as in the zoo); ``activation_fn`` is
+may be ``lin_<value>`` (linear decay to 0, as in the zoo; with a wall-clock budget, over whichever of
+it and ``n_timesteps`` runs out first: :class:`training.callbacks.BudgetSchedule`); ``activation_fn`` is
 a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``), and so is
 ``features_extractor_class`` (``slots``: :class:`training.slot_policy.SlotFeatures`).
 

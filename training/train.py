@@ -204,7 +204,9 @@ def train(
     """Train (or resume) and save into ``out``; return the model.
 
     ``minutes`` also stops training after that much wall time (the learning
-    benchmarks' budget); a curriculum over the initial state
+    benchmarks' budget), and a ``lin_<x>`` learning rate then falls to 0 over
+    whichever of it and ``n_timesteps`` runs out first
+    (:class:`~training.callbacks.BudgetSchedule`); a curriculum over the initial state
     (``initial_state_curriculum``) then runs over whichever of it and
     ``n_timesteps`` runs out first (:class:`~training.callbacks.InitialStateCurriculum`).
     Before the first rollout the training env is set to the curriculum's first
@@ -233,6 +235,7 @@ def train(
     from training.callbacks import (
         AtomicCheckpointCallback,
         InitialStateCurriculum,
+        LearningRateBudget,
         ProgressLog,
         ReferenceEvalCallback,
         StopRequest,
@@ -277,7 +280,7 @@ def train(
         callbacks.append(evaluation)
     seconds = None if minutes is None else 60.0 * float(minutes)
     if seconds is not None:
-        callbacks.append(WallClockBudget(seconds))
+        callbacks.extend([WallClockBudget(seconds), LearningRateBudget(seconds)])
     curriculum = resolved.get("initial_state_curriculum")
     if curriculum is not None:
         total = max(1, resolved["n_timesteps"])
