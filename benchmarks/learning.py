@@ -26,7 +26,9 @@ Results go to ``<out>/benchmark.json``; the run folder holds the model, so
 reproduces the comparison. Over a non-ideal channel (``--config
 training/configs/acoustic_speed_ppo.yaml``) the reference that extrapolates
 stale messages (``reference_extrapolate``) is evaluated too; ``performance``
-and ``normalized`` stay relative to the paper's controller.
+and ``normalized`` stay relative to the paper's controller. ``--set KEY=VALUE``
+(dots nest, repeatable) overrides a key of the config for one run, for example
+``--set learning_rate=lin_3e-4``; the run's ``config.yaml`` records it.
 """
 
 from __future__ import annotations
@@ -41,11 +43,11 @@ from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
 from marine_formation_env import ACTION_LEVELS
-from marine_formation_env.cli import ArgumentParser, int_at_least
+from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
 from marine_formation_env.env import parallel_env
 from training import run_folder
 from training.callbacks import EVAL_SEED, evaluate_policy_episodes
-from training.config import apply_overrides, load_config, validate
+from training.config import TrainConfigError, apply_overrides, load_config, validate
 from training.learned import ModelPolicy
 from training.train import train
 
@@ -63,11 +65,14 @@ def run_benchmark(
     config_path: Path | None = None,
     progress: bool = True,
     vessel_steps: int | None = None,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train for ``minutes`` of wall time at ``level`` and compare with the reference (module docstring).
 
     ``vessel_steps``: also stop after that many vessel-steps (a budget that does
     not depend on the machine's load; the wall-clock budget still applies).
+    ``overrides``: config keys replaced before training (``--set``, dots nest),
+    recorded in the run folder's ``config.yaml``.
     """
     if level not in ACTION_LEVELS:
         raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
@@ -75,7 +80,8 @@ def run_benchmark(
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
     ceiling = 10**9 if vessel_steps is None else int(vessel_steps)
-    resolved = validate(apply_overrides(load_config(path), {"n_timesteps": ceiling, "eval_freq": 0}))
+    config = apply_overrides(load_config(path), overrides or {})
+    resolved = validate(apply_overrides(config, {"n_timesteps": ceiling, "eval_freq": 0}))
     start = time.perf_counter()
     model = train(
         resolved,
@@ -157,14 +163,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         help="also stop after this many vessel-steps (a budget independent of the machine's load)",
     )
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="override a config key; dots nest"
+    )
     parser.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
     if not args.minutes > 0:
         parser.error(f"--minutes must be > 0, got {args.minutes}")
     out = args.out or Path("runs") / f"benchmark_{args.level}"
+    try:  # a bad file or override is refused here, in one line, before any training
+        overrides = parse_overrides(args.set, nest=False)
+        validate(apply_overrides(load_config(args.config or CONFIG_DIR / f"paper_{args.level}_ppo.yaml"), overrides))
+    except (TrainConfigError, ValueError, OSError) as err:
+        report_error(parser.prog, str(err))
     report = run_benchmark(
-        args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet, args.vessel_steps
-    )
+        args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet, args.vessel_steps,
+        overrides,
+    )  # fmt: skip
     print(format_report(report))
     print(f"written {out / 'benchmark.json'}")
     return 0

@@ -1,0 +1,38 @@
+"""``python -m benchmarks.learning``: ``--set`` overrides reach the run, bad ones are refused before training."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+
+pytest.importorskip("stable_baselines3")
+
+from benchmarks import learning
+from marine_formation_env import ENV_ID
+
+
+@pytest.mark.parametrize(
+    ("item", "message"),
+    [
+        ("learning_rate=lin_fast", "learning_rate must be a number or 'lin_<number>', got 'lin_fast'"),
+        ("n_stepz=64", "n_stepz"),
+        ("no_equals_sign", "no_equals_sign"),
+    ],
+)
+def test_a_bad_override_is_refused_by_name_before_any_training(tmp_path, capsys, item, message):
+    with pytest.raises(SystemExit) as stop:
+        learning.main(["--minutes", "1", "--out", str(tmp_path / "run"), "--set", item])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "run").exists()
+
+
+def test_an_override_reaches_the_run_and_its_recorded_config(tmp_path):
+    out = tmp_path / "run"
+    args = ["--minutes", "1", "--vessel-steps", "384", "--episodes", "1", "--out", str(out), "--quiet"]
+    args += ["--set", "n_envs=2", "--set", "n_steps=64", "--set", "batch_size=64", "--set", "learning_rate=lin_1e-3"]
+    assert learning.main(args) == 0
+    recorded = yaml.safe_load((out / "config.yaml").read_text())[ENV_ID]
+    assert recorded["learning_rate"] == "lin_1e-3" and recorded["n_envs"] == 2
+    assert recorded["n_timesteps"] == 384  # the budget's ceiling still applies on top of the overrides
