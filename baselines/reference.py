@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import BatchPolicy
-from marine_formation_env.actions import normalized_actions
+from marine_formation_env.actions import LEVEL_COMMANDS, normalized_actions
 from marine_formation_env.control import (
     consensus_speed,
     curved_path_following_inputs,
@@ -191,8 +191,7 @@ class ReferencePolicy(BatchPolicy):
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Normalized actions ``(..., A)`` for observations ``(..., obs_dim)``."""
         cmd = self.commands(obs, advance=True)
-        keys = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
-        chosen = {k: cmd[k] for k in keys[self.config.action_level]}
+        chosen = {k: cmd[k] for k in LEVEL_COMMANDS[self.config.action_level]}
         return normalized_actions(self.config, **chosen).astype(np.float32)
 
     def commanded_speed(self, observations: Mapping[str, np.ndarray]) -> dict[str, float]:

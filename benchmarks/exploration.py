@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from marine_formation_env import ACTION_LEVELS
+from marine_formation_env.actions import LEVEL_COMMANDS
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least, report_error
 from marine_formation_env.core import FormationCore
@@ -43,8 +44,6 @@ from marine_formation_env.frontend import InitialStates
 from marine_formation_env.rules import outside_workspace
 from marine_formation_env.scenarios import SCENARIOS, make_config
 
-#: The action entries of each level, in order (for the reference's table).
-ACTION_ENTRIES = {"force": ("tau_u", "tau_r"), "guidance": ("speed", "heading"), "speed": ("speed",)}
 #: What ended a formation, checked in this order on its last state.
 CAUSES = ("yaw_rate", "speed", "workspace", "collision")
 
@@ -180,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
                                      args.after)  # fmt: skip
         except ValueError as err:
             report_error(parser.prog, str(err))
-        entries = ACTION_ENTRIES[args.level]
+        entries = LEVEL_COMMANDS[args.level]
         print(f"\nthe reference's |a| over {args.formations} episodes, {args.scenario}, {args.level} level")
         print(f"| statistic | {' | '.join(entries)} |")
         print("|---|" + "---|" * len(used["max"]))

@@ -56,6 +56,11 @@ __all__ = ["main", "run_benchmark"]
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "training" / "configs"
 
 
+def config_file(level: str, config_path: Path | None = None) -> Path:
+    """The training config a run reads: ``config_path``, or ``training/configs/paper_<level>_ppo.yaml``."""
+    return config_path or CONFIG_DIR / f"paper_{level}_ppo.yaml"
+
+
 def run_benchmark(
     level: str,
     minutes: float,
@@ -76,7 +81,7 @@ def run_benchmark(
     """
     if level not in ACTION_LEVELS:
         raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
-    path = config_path or CONFIG_DIR / f"paper_{level}_ppo.yaml"
+    path = config_file(level, config_path)
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
     ceiling = 10**9 if vessel_steps is None else int(vessel_steps)
@@ -173,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     out = args.out or Path("runs") / f"benchmark_{args.level}"
     try:  # a bad file or override is refused here, in one line, before any training
         overrides = parse_overrides(args.set, nest=False)
-        validate(apply_overrides(load_config(args.config or CONFIG_DIR / f"paper_{args.level}_ppo.yaml"), overrides))
+        validate(apply_overrides(load_config(config_file(args.level, args.config)), overrides))
     except (TrainConfigError, ValueError, OSError) as err:
         report_error(parser.prog, str(err))
     report = run_benchmark(

@@ -14,7 +14,11 @@ from gymnasium import spaces
 
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["action_space", "map_actions", "normalized_actions", "physical_commands"]
+__all__ = ["LEVEL_COMMANDS", "action_space", "map_actions", "normalized_actions", "physical_commands"]
+
+#: The physical command behind each action entry of a level, in the action's order
+#: (the keys of :func:`physical_commands`).
+LEVEL_COMMANDS = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
 
 
 def action_space(config: ScenarioConfig, joint: bool = False) -> spaces.Box:

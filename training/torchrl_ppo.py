@@ -245,11 +245,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     if cfg["action_head_gain"] is not None:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
-    cfg["action_scale"] = _action_scale(cfg["action_scale"], cfg["scenario"], cfg["env_kwargs"])
-    if np.any(np.asarray(cfg["action_scale"]) != 1.0) and cfg["distribution"] != "normal":
-        raise TrainConfigError(
-            f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
-        )
     if cfg["frames_per_batch"] % cfg["num_envs"]:
         raise TrainConfigError(
             f"frames_per_batch = {cfg['frames_per_batch']} must be a multiple of num_envs = {cfg['num_envs']}"
@@ -261,17 +256,21 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     from marine_formation_env.scenarios import make_config
 
     try:
-        make_config(cfg["scenario"], **cfg["env_kwargs"])
+        scenario = make_config(cfg["scenario"], **cfg["env_kwargs"])
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
+    cfg["action_scale"] = _action_scale(cfg["action_scale"], scenario.action_dim)
+    if np.any(np.asarray(cfg["action_scale"]) != 1.0) and cfg["distribution"] != "normal":
+        raise TrainConfigError(
+            f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
+        )
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
     return cfg
 
 
-def _action_scale(value: Any, scenario: Any, env_kwargs: dict[str, Any]) -> float | list[float]:
-    """``action_scale``: one number in (0, 1] or a list of them, one per action entry of the scenario's level."""
-    from marine_formation_env.scenarios import make_config
+def _action_scale(value: Any, size: int) -> float | list[float]:
+    """``action_scale``: one number in (0, 1] or a list of ``size`` of them, one per action entry."""
 
     def entry(x: Any) -> float:
         if isinstance(x, bool) or not isinstance(x, (int, float)) or not 0.0 < float(x) <= 1.0:
@@ -280,10 +279,6 @@ def _action_scale(value: Any, scenario: Any, env_kwargs: dict[str, Any]) -> floa
 
     if not isinstance(value, list):
         return entry(value)
-    try:
-        size = make_config(scenario, **env_kwargs).action_dim
-    except (ValueError, TypeError):
-        size = len(value)  # the scenario's own error is raised by resolve()
     if len(value) != size:
         raise TrainConfigError(f"action_scale has {len(value)} entries, the action has {size}: got {value!r}")
     return [entry(x) for x in value]
