@@ -7,7 +7,10 @@ Example::
 Trains PPO (``training/configs/paper_<level>_ppo.yaml``: the paper's scenario
 with randomized initial states) until the wall-clock budget is spent, then
 runs the learned policy, the reference policy and a uniform random policy on
-the same ``--episodes`` evaluation seeds and reports:
+the same ``--episodes`` evaluation seeds, 1 000 000, 1 000 001, …
+(``training.callbacks.EVAL_SEED``, the seeds of the evaluations during
+training; ``benchmarks.learned_baselines`` evaluates on 10 000, 10 001, …,
+so the two report different returns for the same policy), and reports:
 
 * mean ± std of the episode return (≤ 0; 0 is perfect) for each policy;
 * ``performance = R_reference / R_learned``: the fraction of the reference's
@@ -22,8 +25,9 @@ the same ``--episodes`` evaluation seeds and reports:
   vessel-steps used.
 
 Results go to ``<out>/benchmark.json``; the run folder holds the model, so
-``python -m baselines.evaluate --policy reference --policy <out>/model.zip``
-reproduces the comparison. Over a non-ideal channel (``--config
+``python -m baselines.evaluate --policy reference --policy <out>/model.zip
+--episodes 10 --seed 1000000`` (with the config's scenario and ``env_kwargs``
+as ``--scenario``/``--set``) reproduces the comparison. Over a non-ideal channel (``--config
 training/configs/acoustic_speed_ppo.yaml``) the reference that extrapolates
 stale messages (``reference_extrapolate``) is evaluated too; ``performance``
 and ``normalized`` stay relative to the paper's controller. ``--set KEY=VALUE``
