@@ -25,7 +25,10 @@ Definitions (n vessels, θ_j = x_j − D_xj):
 * effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
 * action change (smoothness): mean over consecutive periods, vessels and
   action components of the normalized action's change |a_k − a_{k−1}|
-  (each component in [−1, 1], so 0 … 2; 0 for a constant command);
+  (each component in [−1, 1], so 0 … 2; 0 for a constant command); and the
+  same per component, ``action_change_<command>`` with the level's command
+  names (:data:`marine_formation_env.actions.LEVEL_COMMANDS`: ``tau_u``,
+  ``tau_r``; ``u_c``, ``psi_d``; ``u_c``), which says which command chatters;
 * return: per-vessel sum of rewards, averaged over vessels;
 * success: the episode ran to its time limit (no collision, no exit from the
   workspace or envelope) and at its end every error is inside
@@ -40,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from baselines.rollout import Trajectory
+from marine_formation_env.actions import LEVEL_COMMANDS
 from marine_formation_env.dynamics import PSI, U, V, X, Y, wrap_angle
 from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.scenarios import ScenarioConfig
@@ -48,6 +52,7 @@ __all__ = [
     "SETTLING_BANDS",
     "SUCCESS_BANDS",
     "action_change",
+    "action_change_by_entry",
     "episode_metrics",
     "goal_errors",
     "path_coordinates_along",
@@ -150,6 +155,16 @@ def action_change(actions: np.ndarray) -> float:
     return float(np.mean(np.abs(np.diff(actions, axis=0))))
 
 
+def action_change_by_entry(actions: np.ndarray) -> np.ndarray:
+    """Mean |a_k − a_{k−1}| of ``(T, n, A)`` normalized actions per component: ``(A,)`` (zeros if T < 2)."""
+    actions = np.asarray(actions, dtype=float)
+    if actions.ndim != 3:
+        raise ValueError(f"actions must have the shape (T, n, A), got {actions.shape}")
+    if len(actions) < 2:
+        return np.zeros(actions.shape[-1])
+    return np.mean(np.abs(np.diff(actions, axis=0)), axis=(0, 1))  # type: ignore[no-any-return]
+
+
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
@@ -187,6 +202,10 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
         "surge_outside_band_time": _surge_outside_time(traj, cfg),
         "effort": float(np.mean(np.square(traj.actions))) if traj.actions.size else 0.0,
         "action_change": action_change(traj.actions),
+        **{
+            f"action_change_{name}": float(change)
+            for name, change in zip(LEVEL_COMMANDS[cfg.action_level], action_change_by_entry(traj.actions), strict=True)
+        },
         "min_separation": float(separation.min()),
         "terminated": traj.terminated,
         "collision": traj.collision,
