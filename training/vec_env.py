@@ -15,6 +15,9 @@ already those of the next episode. ``seed(s)`` makes formation ``b`` start from
 :class:`TeamsVecEnv` puts several of them side by side (teams of different
 sizes or graphs whose observations share one length, ``observation_slots``):
 one policy trains on all of them at once.
+
+:class:`ActionChangePenalty` charges the learner for changing its action
+between control periods (learner-side shaping, never the benchmark's reward).
 """
 
 from __future__ import annotations
@@ -25,12 +28,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode
-from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
+from stable_baselines3.common.vec_env.base_vec_env import (
+    VecEnv,
+    VecEnvIndices,
+    VecEnvObs,
+    VecEnvStepReturn,
+    VecEnvWrapper,
+)
 
 from marine_formation_env.frontend import REWARD_INFO_KEYS
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-__all__ = ["SharedPolicyVecEnv", "TeamsVecEnv"]
+__all__ = ["ActionChangePenalty", "SharedPolicyVecEnv", "TeamsVecEnv"]
 
 
 class SharedPolicyVecEnv(VecEnv):
@@ -50,6 +59,7 @@ class SharedPolicyVecEnv(VecEnv):
             **overrides,
         )
         self.config = self.venv.config
+        self.dt = self.config.dt
         self.n_formations = n_formations
         self.n_vessels = self.config.n_vessels
         self.render_mode = None
@@ -137,7 +147,7 @@ class SharedPolicyVecEnv(VecEnv):
 class TeamsVecEnv(VecEnv):
     """Several :class:`SharedPolicyVecEnv` (teams) as one SB3 ``VecEnv``: their entries one after the other.
 
-    Every team must have the same action space and observation length (pad
+    Every team must have the same action space, control period and observation length (pad
     the observations with ``observation_slots``); the observation space is
     the smallest box that holds every team's (each team's bounds follow its
     workspace and formation). ``seed(s)`` seeds team ``k``
@@ -161,12 +171,16 @@ class TeamsVecEnv(VecEnv):
                     f"team {k} has observations of shape {shape} and action space {team.action_space}, team 0 "
                     f"{first.observation_space.shape} and {first.action_space}: pad with observation_slots"
                 )
+        periods = sorted({team.dt for team in teams})
+        if len(periods) > 1:
+            raise ValueError(f"every team must have the same control period dt, got {periods}")
         boxes = [team.observation_space for team in teams]
         if not all(isinstance(box, gym.spaces.Box) for box in boxes):
             raise ValueError("every team's observation space must be a Box")
         low = np.min([box.low for box in boxes if isinstance(box, gym.spaces.Box)], axis=0)
         high = np.max([box.high for box in boxes if isinstance(box, gym.spaces.Box)], axis=0)
         self.teams = list(teams)
+        self.dt = first.dt
         self.bounds = np.cumsum([0] + [team.num_envs for team in teams])
         self.render_mode = None
         space = gym.spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
@@ -243,3 +257,64 @@ class TeamsVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [None] * self.num_envs
+
+
+class ActionChangePenalty(VecEnvWrapper):
+    """The learner's reward minus ``dt·weight·mean_i |a_k,i − a_{k−1},i|`` per entry (a smoothness cost).
+
+    ``a_k`` is the entry's normalized action of period k, clipped to [−1, 1]
+    as the env applies it, and the mean runs over its components; the cost
+    is charged from an episode's second period on (nothing at its first,
+    after a reset or an entry's autoreset), in the units of the env's reward
+    (``dt·w·c``, as the effort term's ``dt·w·mean(a²)``), so a policy that
+    flips a command between −1 and +1 every period pays ``2·weight`` per
+    second. This shapes what the learner optimizes, as ``train_reward`` does;
+    the benchmark's reward, evaluations and exports do not see it. The
+    entry's info gets it as ``reward_action_change`` (≤ 0).
+
+    The env's terminal penalty charges the benchmark's worst cost rate for
+    the time an episode ends early and not this cost, so a weight that is
+    large against that rate (2.75 per second by default) would make ending
+    early pay; keep it well below.
+
+    Args:
+        venv: the training VecEnv (:class:`SharedPolicyVecEnv` or :class:`TeamsVecEnv`).
+        weight: the cost's weight w ≥ 0 [1/s].
+        dt: the control period [s].
+    """
+
+    def __init__(self, venv: VecEnv, weight: float, dt: float) -> None:
+        if not (np.isfinite(weight) and weight >= 0):
+            raise ValueError(f"the action-change weight must be a number >= 0, got {weight!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"the control period dt must be > 0, got {dt!r}")
+        super().__init__(venv)
+        self.weight = float(weight)
+        self.dt = float(dt)
+        self._actions: np.ndarray | None = None
+        self._previous: np.ndarray | None = None
+        self._fresh = np.ones(self.num_envs, dtype=bool)
+
+    def reset(self) -> VecEnvObs:
+        obs = self.venv.reset()
+        self._previous = None
+        self._fresh[:] = True
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.num_envs, -1), -1.0, 1.0)
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        cost = np.zeros(self.num_envs)
+        if self._previous is not None:
+            change = np.mean(np.abs(self._actions - self._previous), axis=-1)
+            cost = np.where(self._fresh, 0.0, self.dt * self.weight * change)
+        for info, value in zip(infos, cost, strict=True):
+            info["reward_action_change"] = -float(value)
+        self._previous, self._actions = self._actions, None
+        self._fresh = np.asarray(dones, dtype=bool).copy()  # these entries start a new episode next period
+        return obs, (rewards - cost).astype(rewards.dtype), dones, infos
