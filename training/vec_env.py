@@ -292,12 +292,12 @@ class ActionChangePenalty(VecEnvWrapper):
         self.weight = float(weight)
         self.dt = float(dt)
         self._actions: np.ndarray | None = None
-        self._previous: np.ndarray | None = None
+        # the last period's actions; an entry's first period (``_fresh``) is charged nothing whatever they hold
+        self._previous = np.zeros((self.num_envs, int(np.prod(self.action_space.shape or ()))))
         self._fresh = np.ones(self.num_envs, dtype=bool)
 
     def reset(self) -> VecEnvObs:
         obs = self.venv.reset()
-        self._previous = None
         self._fresh[:] = True
         return obs
 
@@ -309,10 +309,8 @@ class ActionChangePenalty(VecEnvWrapper):
         obs, rewards, dones, infos = self.venv.step_wait()
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
-        cost = np.zeros(self.num_envs)
-        if self._previous is not None:
-            change = np.mean(np.abs(self._actions - self._previous), axis=-1)
-            cost = np.where(self._fresh, 0.0, self.dt * self.weight * change)
+        change = np.mean(np.abs(self._actions - self._previous), axis=-1)
+        cost = np.where(self._fresh, 0.0, self.dt * self.weight * change)
         for info, value in zip(infos, cost, strict=True):
             info["reward_action_change"] = -float(value)
         self._previous, self._actions = self._actions, None
