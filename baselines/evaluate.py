@@ -129,7 +129,8 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
             check_compatible(policy.info, env.config, obs_dim)
             return policy
         expected, actions = policy.observation_dim, policy.action_dim
-        if expected != obs_dim or actions != env.config.action_dim:
+        any_team = getattr(policy, "any_slots", False)  # a slot network reads any team (training.learned)
+        if (expected != obs_dim and not any_team) or actions != env.config.action_dim:
             raise ValueError(
                 f"model {spec!r} expects observations of size {expected} and actions of size "
                 f"{actions}, but this scenario has {obs_dim} and "
@@ -191,6 +192,8 @@ def evaluate(
             loaded[spec], run_config = load_model(spec)
             if not trained_on:
                 trained_on = {"scenario": run_config["scenario"], **run_config["env_kwargs"]}
+                if getattr(loaded[spec], "any_slots", False):  # as for an any-team pretrained policy
+                    trained_on.pop("observation_slots", None)
     scenario = scenario or trained_on.pop("scenario", "paper")
     trained_on.pop("scenario", None)
     overrides = {**trained_on, **overrides}

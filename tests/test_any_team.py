@@ -196,6 +196,8 @@ def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_pa
     assert stacked.shape == (20, OWN_SIZE + 19 * SLOT_SIZE)
     actions = portable.act_batch(stacked)
     assert actions.shape == (20, 1) and np.all(np.abs(actions) <= 1.0)
+    # the run folder's SB3 model acts in the team of 20 too (through the network, not SB3's shape-checked predict)
+    np.testing.assert_allclose(trained.act_batch(stacked), actions, atol=2e-5)
     # from the command line, on another team size: the header's padding is not carried over
     import baselines.pretrained as pretrained
     from baselines import evaluate as evaluate_module
@@ -205,6 +207,9 @@ def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_pa
             "topology=chain", "--set", "horizon=10.0", "--quiet", "--json", str(tmp_path / "twelve.json")]  # fmt: skip
     assert evaluate_module.main(args) == 0
     assert '"n_vessels": 12' in (tmp_path / "twelve.json").read_text()
+    args[1] = str(run / "model.zip")  # the run folder's model, on the team of 12 as well
+    assert evaluate_module.main([*args[:-1], str(tmp_path / "twelve_run.json")]) == 0
+    assert '"n_vessels": 12' in (tmp_path / "twelve_run.json").read_text()
     # the same observations padded to 30 slots act the same: the network reads the heard slots only
     padded = np.concatenate([stacked, np.zeros((20, 11 * SLOT_SIZE))], axis=1)
     np.testing.assert_allclose(portable.act_batch(padded), actions, atol=1e-6)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import inspect
 import json
+import re
 import shutil
 import time
 import warnings
@@ -539,7 +540,7 @@ def test_load_learned_policy_acts_inside_action_space(smoke_run):
     assert ckpt_policy.normalizer is not None
 
 
-def test_evaluate_reference_and_model_same_seeds(smoke_run, tmp_path):
+def test_evaluate_reference_and_model_same_seeds(smoke_run, tmp_path, capsys):
     from baselines import evaluate
 
     model_path = str(smoke_run / "model.zip")
@@ -569,6 +570,13 @@ def test_evaluate_reference_and_model_same_seeds(smoke_run, tmp_path):
     for path in (plot, tmp_path / "cmp_0_reference.png", tmp_path / "cmp_1_run.png"):
         assert path.is_file(), path
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a plain MLP reads its training team's observation length only: another team is refused by name
+    with pytest.raises(SystemExit) as refused:
+        evaluate.main(["--policy", model_path, "--set", "n_vessels=4", "--set", "topology=ring", "--quiet"])
+    assert refused.value.code == 2
+    assert re.search(r"expects observations of size 18 .* this scenario has 22 .* n_vessels 4", capsys.readouterr().err)
+    with pytest.raises(ValueError, match="this policy reads observations of size 18, got 22"):
+        learned.act_batch(np.zeros((4, 22), dtype=np.float32))
 
 
 def test_resume_continues_from_last_checkpoint(smoke_run, tmp_path, capsys):

@@ -37,6 +37,13 @@ __all__ = [
 class ModelPolicy(BatchPolicy):
     """A shared SB3 policy acting for every vessel.
 
+    A policy whose features extractor is the slot network
+    (:class:`training.slot_policy.SlotFeatures`, ``any_slots``) reads any
+    number of observation slots, so it acts in any team: observations of
+    another length than its training team's go through the network directly
+    (SB3's ``predict`` accepts only the training shape), with the same
+    deterministic mode and the same clipping to the action space.
+
     Args:
         model: an SB3 model whose observation is one vessel's observation.
         normalizer: a ``VecNormalize`` (or None) whose ``normalize_obs`` is applied first.
@@ -49,14 +56,32 @@ class ModelPolicy(BatchPolicy):
         self.deterministic = deterministic
         self.observation_dim: int = model.observation_space.shape[0]
         self.action_dim: int = model.action_space.shape[0]
+        extractor = getattr(model.policy, "features_extractor", None)
+        self.any_slots: bool = type(extractor).__name__ == "SlotFeatures"
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(..., A)`` for observations ``(..., dim)``."""
         flat = np.asarray(obs, dtype=np.float32).reshape(-1, obs.shape[-1])
+        if flat.shape[-1] != self.observation_dim and not self.any_slots:
+            raise ValueError(f"this policy reads observations of size {self.observation_dim}, got {flat.shape[-1]}")
         if self.normalizer is not None:
             flat = self.normalizer.normalize_obs(flat)
-        actions, _ = self.model.predict(flat, deterministic=self.deterministic)
+        if flat.shape[-1] == self.observation_dim:
+            actions, _ = self.model.predict(flat, deterministic=self.deterministic)
+        else:
+            actions = self._act_any_slots(flat)
         return np.asarray(actions, dtype=np.float32).reshape(*obs.shape[:-1], -1)
+
+    def _act_any_slots(self, flat: np.ndarray) -> np.ndarray:
+        """What ``predict`` computes, for an observation length other than the training team's."""
+        import torch
+
+        policy = self.model.policy
+        with torch.no_grad():
+            actions = policy._predict(torch.as_tensor(flat, device=policy.device), self.deterministic).cpu().numpy()
+        if policy.squash_output:
+            return policy.unscale_action(actions)  # type: ignore[no-any-return]
+        return np.clip(actions, self.model.action_space.low, self.model.action_space.high)
 
 
 def run_folder_of(path: str | Path) -> Path:
