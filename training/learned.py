@@ -56,8 +56,9 @@ class ModelPolicy(BatchPolicy):
         self.deterministic = deterministic
         self.observation_dim: int = model.observation_space.shape[0]
         self.action_dim: int = model.action_space.shape[0]
-        extractor = getattr(model.policy, "features_extractor", None)
-        self.any_slots: bool = type(extractor).__name__ == "SlotFeatures"
+        from training.slot_policy import SlotFeatures  # torch: loaded with the model already
+
+        self.any_slots: bool = isinstance(getattr(model.policy, "features_extractor", None), SlotFeatures)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(..., A)`` for observations ``(..., dim)``."""
