@@ -8,6 +8,7 @@ function, and each team's own ``SharedPolicyVecEnv`` stepped alone.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -209,7 +210,14 @@ def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_pa
     assert '"n_vessels": 12' in (tmp_path / "twelve.json").read_text()
     args[1] = str(run / "model.zip")  # the run folder's model, on the team of 12 as well
     assert evaluate_module.main([*args[:-1], str(tmp_path / "twelve_run.json")]) == 0
-    assert '"n_vessels": 12' in (tmp_path / "twelve_run.json").read_text()
+    exported, direct = (json.loads((tmp_path / name).read_text()) for name in ("twelve.json", "twelve_run.json"))
+    assert direct["config"]["n_vessels"] == 12 and str(run / "model.zip") in direct["policies"]
+    # the same network in torch and in numpy: actions agree to float32 rounding (above), so over 10 s do the returns
+    returns = [
+        [episode["return"] for episode in report["policies"][label]["episodes"]]
+        for report, label in ((exported, "pretrained:any_team"), (direct, str(run / "model.zip")))
+    ]
+    np.testing.assert_allclose(returns[1], returns[0], rtol=1e-4)
     # the same observations padded to 30 slots act the same: the network reads the heard slots only
     padded = np.concatenate([stacked, np.zeros((20, 11 * SLOT_SIZE))], axis=1)
     np.testing.assert_allclose(portable.act_batch(padded), actions, atol=1e-6)

@@ -66,6 +66,11 @@ class ModelPolicy(BatchPolicy):
         if flat.shape[-1] != self.observation_dim and not self.any_slots:
             raise ValueError(f"this policy reads observations of size {self.observation_dim}, got {flat.shape[-1]}")
         if self.normalizer is not None:
+            if flat.shape[-1] != self.observation_dim and self.normalizer.norm_obs:  # training.config refuses this
+                raise ValueError(
+                    f"observation statistics of size {self.observation_dim} cannot normalize observations "
+                    f"of size {flat.shape[-1]}"
+                )
             flat = self.normalizer.normalize_obs(flat)
         if flat.shape[-1] == self.observation_dim:
             actions, _ = self.model.predict(flat, deterministic=self.deterministic)
@@ -78,6 +83,7 @@ class ModelPolicy(BatchPolicy):
         import torch
 
         policy = self.model.policy
+        policy.set_training_mode(False)  # as predict does
         with torch.no_grad():
             actions = policy._predict(torch.as_tensor(flat, device=policy.device), self.deterministic).cpu().numpy()
         if policy.squash_output:
