@@ -290,6 +290,8 @@ def test_checkpoints_are_written_atomically_statistics_first(tmp_path, capsys, m
         ({"algo": "td3", "policy_delay": 0}, ["policy_delay", "got 0"]),
         ({"gamma": 1.5}, ["gamma", "got 1.5"]),
         ({"gamma": "x"}, ["gamma", "got 'x'"]),
+        ({"gamma": float("nan")}, ["gamma", "got nan"]),  # NaN fails every comparison: refused, not let through
+        ({"vf_coef": float("inf")}, ["vf_coef", "got inf"]),
         ({"learning_rate": 0}, ["learning_rate", "got 0"]),
         ({"learning_rate": "lin_-1"}, ["learning_rate", "lin_-1"]),
         ({"clip_range": "fish"}, ["clip_range", "'fish'"]),

@@ -36,6 +36,10 @@ keep ``env_kwargs``'s reward, the benchmark's. ``action_change_penalty`` (a
 weight w ≥ 0 in 1/s, default 0: none) charges the learner ``dt·w·mean|a_k −
 a_{k−1}|`` per vessel and period for changing its action
 (:class:`training.vec_env.ActionChangePenalty`), learner-side shaping as well.
+``algo: ppo`` is :class:`training.smoothness.SmoothPPO`, SB3's PPO with one more
+hyperparameter, ``temporal_smoothness`` (λ ≥ 0, default 0: PPO itself), a
+regularizer on the change of the policy's mean action between consecutive
+observations that leaves the reward alone (CAPS' temporal term).
 
 Hyperparameter names are checked against the algorithm's constructor, env
 overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
@@ -129,6 +133,7 @@ NUMBER_RANGES: dict[str, tuple[float | None, float | None]] = {
     "vf_coef": (0.0, None),
     "target_policy_noise": (0.0, None),
     "target_noise_clip": (0.0, None),
+    "temporal_smoothness": (0.0, None),
 }
 #: Hyperparameters that must be numbers > 0.
 POSITIVE_NUMBERS = ("learning_rate", "clip_range", "max_grad_norm")
@@ -148,7 +153,24 @@ def algo_class(name: str) -> Any:
 
     if name not in ALGOS:
         raise TrainConfigError(f"unknown algo {name!r}; choose one of {list(ALGOS)}")
+    if name == "ppo":  # PPO with one more hyperparameter, temporal_smoothness (default 0: PPO itself)
+        from training.smoothness import SmoothPPO
+
+        return SmoothPPO
     return getattr(sb3, name.upper())
+
+
+def hyperparameter_names(cls: Any) -> set[str]:
+    """The constructor arguments of an algorithm class and of the bases it passes ``**kwargs`` on to."""
+    names: set[str] = set()
+    for klass in cls.__mro__:
+        if "__init__" not in vars(klass):
+            continue
+        params = inspect.signature(klass.__init__).parameters.values()
+        names |= {p.name for p in params if p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)}
+        if not any(p.kind == p.VAR_KEYWORD for p in params):
+            break
+    return names - _NOT_HYPERPARAMS
 
 
 class _Loader(yaml.SafeLoader):
@@ -366,7 +388,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     """
     resolved = {**copy.deepcopy(SPECIAL_KEYS), **copy.deepcopy(config)}
     cls = algo_class(resolved["algo"])
-    allowed = set(inspect.signature(cls.__init__).parameters) - _NOT_HYPERPARAMS
+    allowed = hyperparameter_names(cls)
     unknown = sorted(set(resolved) - set(SPECIAL_KEYS) - allowed)
     if unknown:
         raise TrainConfigError(
@@ -524,7 +546,8 @@ def _check_hyperparameters(resolved: dict[str, Any]) -> None:
         if key not in resolved:
             continue
         value = resolved[key]
-        if not _is_number(value) or (low is not None and value < low) or (high is not None and value > high):
+        valid = _is_number(value) and math.isfinite(value)
+        if not valid or (low is not None and value < low) or (high is not None and value > high):
             bounds = f"in [{low}, {high}]" if high is not None else f"≥ {low}"
             raise TrainConfigError(f"{key} must be a number {bounds}, got {value!r}")
     for key in POSITIVE_NUMBERS:
