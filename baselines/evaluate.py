@@ -131,11 +131,13 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
         expected, actions = policy.observation_dim, policy.action_dim
         any_team = getattr(policy, "any_slots", False)  # a slot network reads any team (training.learned)
         if (expected != obs_dim and not any_team) or actions != env.config.action_dim:
-            sizes = (f"actions of size {actions}", f"{env.config.action_dim}")
-            if not any_team:  # the observation length matters too
-                sizes = (f"observations of size {expected} and {sizes[0]}", f"{obs_dim} and {sizes[1]}")
+            if any_team:  # only the action size can be wrong
+                wants, has = f"actions of size {actions}", f"{env.config.action_dim}"
+            else:
+                wants = f"observations of size {expected} and actions of size {actions}"
+                has = f"{obs_dim} and {env.config.action_dim}"
             raise ValueError(
-                f"model {spec!r} expects {sizes[0]}, but this scenario has {sizes[1]} "
+                f"model {spec!r} expects {wants}, but this scenario has {has} "
                 f"(action_level {env.config.action_level!r}, n_vessels {env.config.n_vessels}); "
                 "evaluate it on the scenario it was trained on"
             )

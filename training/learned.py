@@ -63,19 +63,20 @@ class ModelPolicy(BatchPolicy):
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(..., A)`` for observations ``(..., dim)``."""
         flat = np.asarray(obs, dtype=np.float32).reshape(-1, obs.shape[-1])
-        if flat.shape[-1] != self.observation_dim and not self.any_slots:
+        other_length = flat.shape[-1] != self.observation_dim
+        if other_length and not self.any_slots:
             raise ValueError(f"this policy reads observations of size {self.observation_dim}, got {flat.shape[-1]}")
         if self.normalizer is not None:
-            if flat.shape[-1] != self.observation_dim and self.normalizer.norm_obs:  # training.config refuses this
+            if other_length and self.normalizer.norm_obs:  # training.config refuses this
                 raise ValueError(
                     f"observation statistics of size {self.observation_dim} cannot normalize observations "
                     f"of size {flat.shape[-1]}"
                 )
             flat = self.normalizer.normalize_obs(flat)
-        if flat.shape[-1] == self.observation_dim:
-            actions, _ = self.model.predict(flat, deterministic=self.deterministic)
-        else:
+        if other_length:
             actions = self._act_any_slots(flat)
+        else:
+            actions, _ = self.model.predict(flat, deterministic=self.deterministic)
         return np.asarray(actions, dtype=np.float32).reshape(*obs.shape[:-1], -1)
 
     def _act_any_slots(self, flat: np.ndarray) -> np.ndarray:
