@@ -29,6 +29,7 @@ from marine_formation_env.scenarios import make_config  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
+HEADER = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread,smoothness"
 TINY = [
     "num_envs=4",
     "frames_per_batch=40",
@@ -77,8 +78,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
         args += ["--set", item]
     assert main(args) == 0
     progress = (out / "progress.csv").read_text().splitlines()
-    header = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
-    assert progress[0] == header and len(progress) == 3  # two iterations
+    assert progress[0] == HEADER and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["frames"] == 80 and summary["vessel_steps"] == 240
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
@@ -272,7 +272,7 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
         args += ["--set", item]
     assert main(args) == 0
     rows = (out / "progress.csv").read_text().splitlines()
-    assert rows[0] == "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
+    assert rows[0] == HEADER
     lr = [float(r.split(",")[6]) for r in rows[1:]]
     updates = [int(r.split(",")[8]) for r in rows[1:]]
     assert lr[0] == 1e-3 and lr[1] == pytest.approx(0.5e-3)  # the second iteration starts half-way (40 of 80 frames)
@@ -353,6 +353,53 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
     assert [n for n, _ in scaled.named_parameters()] == [n for n, _ in plain.named_parameters()]
     with pytest.raises(ValueError, match="needs distribution 'normal'"):
         trainer._policy_network(7, 2, 3, [16], False, "tanh_normal", 0.3, None, "state_dependent", 0.5)
+
+
+@pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
+def test_the_temporal_smoothness_pass_pulls_the_deterministic_actions_of_consecutive_observations_together(
+    distribution,
+):
+    # the pass's loss is the mean |Δμ| between paired observations: gradient steps on it (Adam, 0.01) must shrink
+    # it on pairs it trains on, whatever the squashing; the loc's path is what moves, not the deviation's
+    torch.manual_seed(0)
+    actor = trainer._policy_network(7, 2, 3, [16], False, distribution, 0.3, None, "state_independent")
+    cfg = resolve({"distribution": distribution, "temporal_smoothness": 1.0, "minibatch_size": 64}, seed=0)
+    obs = 3.0 * torch.randn(4, 32, 3, 7)  # (formations, time, vessels, entries)
+    data = TensorDict(
+        {("vessel", "observation"): obs, ("next", "vessel", "observation"): obs + torch.randn(4, 32, 3, 7)},
+        batch_size=[4, 32],
+    )
+    optim = torch.optim.Adam(actor.parameters(), lr=1e-2)
+
+    def scale_parameters():
+        return [p for name, p in actor.named_parameters() if "scale" in name]
+
+    scale = [p.detach().clone() for p in scale_parameters()]
+    first = trainer._smoothness(actor, optim, data, cfg, 0)
+    for iteration in range(1, 40):
+        last = trainer._smoothness(actor, optim, data, cfg, iteration)
+    assert 0.0 < last < 0.25 * first, (first, last)
+    assert scale and all(torch.equal(p, q) for p, q in zip(scale, scale_parameters(), strict=True))
+
+
+def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_on(tmp_path):
+    # the pass steps the optimizer of the PPO loss: the saved policy of a run with it differs from the same seed's
+    # run without it, which the same seed reproduces exactly (one machine, one build)
+    runs = {}
+    for name, weight in (("off", 0.0), ("again", 0.0), ("on", 5.0)):
+        out = tmp_path / name
+        args = ["--seed", "2", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+        for item in [*TINY, "distribution=normal", f"temporal_smoothness={weight}"]:
+            args += ["--set", item]
+        assert main(args) == 0
+        column = [row.split(",")[10] for row in (out / "progress.csv").read_text().splitlines()[1:]]
+        policy, _ = load_torch_policy(out)
+        runs[name] = (column, [p.detach().clone() for p in policy.actor.parameters()])
+    assert runs["off"][0] == ["", ""] and all(float(x) > 0 for x in runs["on"][0])
+    assert all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["again"][1], strict=True))
+    assert not all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["on"][1], strict=True))
+    with pytest.raises(trainer.TrainConfigError, match="temporal_smoothness"):
+        resolve({"temporal_smoothness": -1.0}, seed=0)
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

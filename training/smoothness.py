@@ -21,10 +21,15 @@ reward, the returns the run logs and every evaluation are unchanged. It is
 a separate gradient step after PPO's epochs, not a term of PPO's clipped
 loss as in the paper. The run's TensorBoard gets
 ``train/temporal_smoothness_loss`` (the distance before the step, without λ).
+
+:func:`smoothness_pass` is the pass itself, for any policy whose mean is a
+differentiable function of the observation; the TorchRL trainer
+(``training.torchrl_ppo``, key ``temporal_smoothness``) calls it too.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -32,7 +37,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.buffers import RolloutBuffer
 
-__all__ = ["SmoothPPO", "consecutive_pairs"]
+__all__ = ["SmoothPPO", "consecutive_pairs", "smoothness_pass"]
 
 
 def consecutive_pairs(buffer: RolloutBuffer) -> tuple[np.ndarray, np.ndarray]:
@@ -78,23 +83,51 @@ class SmoothPPO(PPO):
         policy = self.policy
         policy.set_training_mode(True)
         rng = np.random.default_rng([self.seed or 0, self._n_updates])  # reproducible with the run's seed
-        order = rng.permutation(len(before))
-        distances = []
-        for start in range(0, len(order), self.batch_size):
-            batch = order[start : start + self.batch_size]
-            means = [self._mean_action(side[batch]) for side in (before, after)]
-            distance = torch.mean(torch.abs(means[1] - means[0]))
-            policy.optimizer.zero_grad()
-            (self.temporal_smoothness * distance).backward()
-            torch.nn.utils.clip_grad_norm_(policy.parameters(), self.max_grad_norm)
-            policy.optimizer.step()
-            distances.append(float(distance.detach()))
+        first, second = (torch.as_tensor(side, device=self.device) for side in (before, after))
+        distance = smoothness_pass(
+            self._mean_action, first, second, self.temporal_smoothness, self.batch_size,
+            policy.optimizer, policy.parameters(), self.max_grad_norm, rng,
+        )  # fmt: skip
         policy.set_training_mode(False)
-        return float(np.mean(distances))
+        return distance
 
-    def _mean_action(self, obs: np.ndarray) -> torch.Tensor:
+    def _mean_action(self, obs: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean for a batch of observations (with gradients)."""
-        dist = self.policy.get_distribution(torch.as_tensor(obs, device=self.device)).distribution
+        dist = self.policy.get_distribution(obs).distribution
         if not isinstance(dist, torch.distributions.Normal):
             raise TypeError(f"temporal_smoothness needs a Gaussian policy (Box actions), got {type(dist).__name__}")
         return dist.mean
+
+
+def smoothness_pass(
+    mean: Callable[[torch.Tensor], torch.Tensor],
+    before: torch.Tensor,
+    after: torch.Tensor,
+    weight: float,
+    batch_size: int,
+    optimizer: torch.optim.Optimizer,
+    parameters: Iterable[torch.nn.Parameter],
+    max_grad_norm: float,
+    rng: np.random.Generator,
+) -> float:
+    """One pass of ``weight · mean |mean(after) − mean(before)|`` over the pairs, in shuffled minibatches.
+
+    ``before[i]`` and ``after[i]`` are consecutive observations of one agent in one episode (any trailing
+    shape ``mean`` takes); each minibatch of ``batch_size`` pairs is one step of ``optimizer`` with the
+    gradient norm of ``parameters`` clipped to ``max_grad_norm``, as the PPO steps before it. Returns the
+    mean over minibatches of the distance before each step (without the weight).
+    """
+    if len(before) != len(after):
+        raise ValueError(f"before and after hold {len(before)} and {len(after)} observations; pairs need as many")
+    parameters = list(parameters)
+    order = torch.as_tensor(rng.permutation(len(before)), device=before.device)
+    distances = []
+    for start in range(0, len(order), batch_size):
+        batch = order[start : start + batch_size]
+        distance = torch.mean(torch.abs(mean(after[batch]) - mean(before[batch])))
+        optimizer.zero_grad()
+        (weight * distance).backward()
+        torch.nn.utils.clip_grad_norm_(parameters, max_grad_norm)
+        optimizer.step()
+        distances.append(float(distance.detach()))
+    return float(np.mean(distances)) if distances else float("nan")

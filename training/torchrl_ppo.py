@@ -37,6 +37,7 @@ nest; unknown keys and bad values are refused by name):
 | ``gamma``, ``lmbda`` | discount, GAE λ | 0.99, 0.95 |
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
+| ``temporal_smoothness`` | λ ≥ 0 of CAPS' temporal term on the policy's mean (below); 0: PPO itself | 0.0 |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
@@ -92,6 +93,18 @@ until: 0.5}`` the formations start with a tenth of the scenario's errors at
 first and with all of them from half the budget on. The evaluation always
 uses the scenario's. ``progress.csv`` logs the spread.
 
+``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
+(:mod:`training.smoothness`): after each batch's PPO epochs, one more pass in
+minibatches of ``minibatch_size`` formation-steps minimizes ``λ · mean
+|μ(o') − μ(o)|`` over every vessel's pair of an observation ``o`` and the
+next one ``o'`` of the same episode (the batch's ``("next", "vessel",
+"observation")``, so the last observation of an episode still pairs with the
+one before it), μ the deterministic action before clipping: the Gaussian's
+mean in the env's units with ``distribution: normal``, ``tanh`` of it with
+``tanh_normal``. Rewards, the logged returns and the evaluation are
+unchanged; ``progress.csv`` logs the mean distance before each pass
+(``smoothness``, empty at λ = 0).
+
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
 ``lr · (1 − max(seconds / (60 · minutes), frames / total_frames))``, as SB3's linear
@@ -109,9 +122,9 @@ The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 ``progress.csv`` (per iteration: frames, vessel-steps, seconds, the mean
 training reward per vessel-step, the mean return per vessel of the training
 episodes that ended in the batch and their number (counted per vessel), the
-learning rate, the last approximate KL, the number of minibatch updates and the training env's
-initial-state spread for the next iteration) and ``evaluation.json`` (the learned
-policy's and the reference's mean return over the same seeds). Every file is
+learning rate, the last approximate KL, the number of minibatch updates, the training env's
+initial-state spread for the next iteration and the ``temporal_smoothness`` distance) and
+``evaluation.json`` (the learned policy's and the reference's mean return over the same seeds). Every file is
 written atomically; ``policy.pt`` and ``progress.csv`` are also written once a
 minute during training (:data:`SAVE_SECONDS`), so a long run can be watched and
 an interrupted one keeps its last minute's policy.
@@ -192,6 +205,7 @@ DEFAULTS: dict[str, Any] = {
     "entropy_coef": 1e-4,
     "epochs": 4,
     "minibatch_size": 1600,
+    "temporal_smoothness": 0.0,
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
@@ -226,7 +240,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg[key] = _positive(key, cfg[key])
     for key in ("gamma", "lmbda"):
         cfg[key] = _fraction(key, cfg[key])
-    cfg["entropy_coef"] = _non_negative("entropy_coef", cfg["entropy_coef"])
+    for key in ("entropy_coef", "temporal_smoothness"):
+        cfg[key] = _non_negative(key, cfg[key])
     for key in ("normalize_observations", "normalize_advantage", "normalize_reward"):
         if not isinstance(cfg[key], bool):
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
@@ -695,6 +710,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         for group in optim.param_groups:
             group["lr"] = rate
         kl, updates = _ppo_epochs(loss, optim, buffer, cfg)
+        smoothness = _smoothness(actor, optim, data, cfg, len(rows)) if cfg["temporal_smoothness"] > 0 else ""
         if normalize:  # after the epochs: each batch trains with the statistics it was collected with
             for net in (actor.module[0].module, critic.module):
                 net[0].update(data.get(("vessel", "observation")))
@@ -716,6 +732,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "kl": kl,
                 "updates": updates,
                 "initial_spread": scale,
+                "smoothness": smoothness,
             }
         )
         bar.update(data.numel())
@@ -791,6 +808,30 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tupl
     return kl, updates
 
 
+def _smoothness(actor: Any, optim: Any, data: Any, cfg: dict[str, Any], iteration: int) -> float:
+    """The ``temporal_smoothness`` pass over one batch (module docstring); the mean distance before its steps."""
+    import torch
+
+    from training.smoothness import smoothness_pass
+
+    net = actor.module[0].module  # observation -> (loc, scale), in the env's units (action_scale included)
+    squash = torch.tanh if cfg["distribution"] == "tanh_normal" else (lambda loc: loc)
+
+    def mean(obs: torch.Tensor) -> torch.Tensor:
+        return squash(net(obs)[0])
+
+    n_agents = data.get(("vessel", "observation")).shape[-2]
+    before, after = (
+        data.get(key).reshape(-1, n_agents, data.get(key).shape[-1])
+        for key in (("vessel", "observation"), ("next", "vessel", "observation"))
+    )
+    rng = np.random.default_rng([cfg["seed"], iteration])  # reproducible with the run's seed
+    return smoothness_pass(
+        mean, before, after, cfg["temporal_smoothness"], cfg["minibatch_size"],
+        optim, actor.parameters(), cfg["max_grad_norm"], rng,
+    )  # fmt: skip
+
+
 def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
     """TorchRL's single-process collector over ``env`` (``policy`` None: random actions).
 
@@ -843,6 +884,7 @@ def _save(
         "kl",
         "updates",
         "initial_spread",
+        "smoothness",
     ]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
