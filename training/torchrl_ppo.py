@@ -820,10 +820,9 @@ def _smoothness(actor: Any, optim: Any, data: Any, cfg: dict[str, Any], iteratio
     def mean(obs: torch.Tensor) -> torch.Tensor:
         return squash(net(obs)[0])
 
-    n_agents = data.get(("vessel", "observation")).shape[-2]
+    # (formations, time, vessels, entries) -> (pairs, vessels, entries): the vessels stay together for the MLP
     before, after = (
-        data.get(key).reshape(-1, n_agents, data.get(key).shape[-1])
-        for key in (("vessel", "observation"), ("next", "vessel", "observation"))
+        data.get(key).flatten(0, -3) for key in (("vessel", "observation"), ("next", "vessel", "observation"))
     )
     rng = np.random.default_rng([cfg["seed"], iteration])  # reproducible with the run's seed
     return smoothness_pass(
