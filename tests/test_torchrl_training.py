@@ -356,11 +356,11 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
 
 
 @pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
-def test_the_temporal_smoothness_pass_pulls_the_deterministic_actions_of_consecutive_observations_together(
+def test_the_temporal_smoothness_term_pulls_the_deterministic_actions_of_consecutive_observations_together(
     distribution,
 ):
-    # the pass's loss is the mean |Δμ| between paired observations: gradient steps on it (Adam, 0.01) must shrink
-    # it on pairs it trains on, whatever the squashing; the loc's path is what moves, not the deviation's
+    # the term is the mean |Δμ| between paired observations: gradient steps on it alone (Adam, 0.01) must shrink
+    # it on the pairs it trains on, whatever the squashing; the loc's path is what moves, not the deviation's
     torch.manual_seed(0)
     actor = trainer._policy_network(7, 2, 3, [16], False, distribution, 0.3, None, "state_independent")
     cfg = resolve({"distribution": distribution, "temporal_smoothness": 1.0, "minibatch_size": 64}, seed=0)
@@ -375,16 +375,19 @@ def test_the_temporal_smoothness_pass_pulls_the_deterministic_actions_of_consecu
         return [p for name, p in actor.named_parameters() if "scale" in name]
 
     scale = [p.detach().clone() for p in scale_parameters()]
-    first = trainer._smoothness(actor, optim, data, cfg, 0)
-    for iteration in range(1, 40):
-        last = trainer._smoothness(actor, optim, data, cfg, iteration)
+    term = trainer._smoothness_term(actor, data, cfg, 0)
+    for _ in range(40):  # 20 passes over the 128 pairs, minimizing the term alone
+        optim.zero_grad()
+        term().backward()
+        optim.step()
+    first, last = float(term.distances[0]), float(term.distances[-1])
     assert 0.0 < last < 0.25 * first, (first, last)
     assert scale and all(torch.equal(p, q) for p, q in zip(scale, scale_parameters(), strict=True))
 
 
 def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_on(tmp_path):
-    # the pass steps the optimizer of the PPO loss: the saved policy of a run with it differs from the same seed's
-    # run without it, which the same seed reproduces exactly (one machine, one build)
+    # the term is part of the PPO loss: the saved policy of a run with it differs from the same seed's run
+    # without it, which the same seed reproduces exactly (one machine, one build)
     runs = {}
     for name, weight in (("off", 0.0), ("again", 0.0), ("on", 5.0)):
         out = tmp_path / name

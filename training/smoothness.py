@@ -1,35 +1,45 @@
-"""Temporal action smoothness for SB3's PPO: the temporal term of CAPS.
+"""Temporal action smoothness for PPO: the temporal term of CAPS, inside PPO's loss.
 
 CAPS (Mysore, Mabsout, Mancuso and Saenko, "Regularizing Action Policies for
 Smooth Control with Reinforcement Learning", ICRA 2021) adds to the policy's
 loss the distance between its actions at consecutive states. :class:`SmoothPPO`
 is SB3's PPO with that term as the hyperparameter ``temporal_smoothness``
-(λ ≥ 0, default 0: exactly PPO). After each PPO update it makes one more
-pass over the rollout, in minibatches of ``batch_size``, minimizing
+(λ ≥ 0, default 0: exactly PPO). Every minibatch step of PPO's epochs
+minimizes PPO's loss plus
 
-    λ · mean over consecutive pairs (o_t, o_{t+1}) of mean_k |μ_k(o_{t+1}) − μ_k(o_t)|
+    λ · mean over a minibatch of consecutive pairs (o_t, o_{t+1}) of mean_k |μ_k(o_{t+1}) − μ_k(o_t)|
 
 where μ is the Gaussian's mean (the deterministic action, before clipping)
-and the pairs are those of one env entry within one episode. The distance is
-the one the benchmark's Δa column measures, on the noise-free action.
+and the pairs are those of one env entry within one episode of the rollout,
+``batch_size`` of them per step, drawn in a shuffled order that runs through
+every pair before it repeats one. The distance is the one the benchmark's Δa
+column measures, on the noise-free action. Both terms share one backward
+pass, one gradient clipping and one optimizer step, so λ weighs the term
+against PPO's own gradient.
 
 Unlike a cost on action changes in the learner's reward
 (:class:`training.vec_env.ActionChangePenalty`, which sees the sampled and
 clipped actions), this term does not charge the exploration noise and gives
 nothing for holding an action beyond the bounds of the action space; the
-reward, the returns the run logs and every evaluation are unchanged. It is
-a separate gradient step after PPO's epochs, not a term of PPO's clipped
-loss as in the paper. The run's TensorBoard gets
-``train/temporal_smoothness_loss`` (the distance before the step, without λ).
+reward, the returns the run logs and every evaluation are unchanged. The
+run's TensorBoard gets ``train/temporal_smoothness_loss`` (the mean distance
+over the update's steps, without λ).
 
-:func:`smoothness_pass` is the pass itself, for any policy whose mean is a
+Until commit 5d678b0 the term was a separate pass of optimizer steps after
+PPO's epochs. Adam normalizes each parameter's step by the running size of
+its gradients, so the weight of a loss stepped on its own barely sets the
+size of the step: λ = 1 and λ = 0.1 collapsed the same run alike
+(docs/results.md).
+
+:class:`SmoothnessTerm` is the term itself, for any policy whose mean is a
 differentiable function of the observation; the TorchRL trainer
-(``training.torchrl_ppo``, key ``temporal_smoothness``) calls it too.
+(``training.torchrl_ppo``, key ``temporal_smoothness``) adds it to its PPO
+loss too.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -37,7 +47,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.buffers import RolloutBuffer
 
-__all__ = ["SmoothPPO", "consecutive_pairs", "smoothness_pass"]
+__all__ = ["SmoothPPO", "SmoothnessTerm", "consecutive_pairs"]
 
 
 def consecutive_pairs(buffer: RolloutBuffer) -> tuple[np.ndarray, np.ndarray]:
@@ -56,8 +66,53 @@ def consecutive_pairs(buffer: RolloutBuffer) -> tuple[np.ndarray, np.ndarray]:
     return obs[:-1][same_episode], obs[1:][same_episode]
 
 
+class SmoothnessTerm:
+    """``weight · mean |mean(after) − mean(before)|`` on the next minibatch of pairs, at each call.
+
+    ``before[i]`` and ``after[i]`` are consecutive observations of one agent in one episode (any
+    trailing shape ``mean`` takes). Each call takes the next ``batch_size`` pairs of a shuffled
+    order (``rng``), reshuffling once every pair has been used, and returns the weighted distance
+    as a tensor with gradients, to be added to the loss of one optimizer step.
+    :attr:`distances` lists the distance of each call, without the weight; :attr:`mean_distance` is
+    their mean.
+    """
+
+    def __init__(
+        self,
+        mean: Callable[[torch.Tensor], torch.Tensor],
+        before: torch.Tensor,
+        after: torch.Tensor,
+        weight: float,
+        batch_size: int,
+        rng: np.random.Generator,
+    ) -> None:
+        if len(before) != len(after):
+            raise ValueError(f"before and after hold {len(before)} and {len(after)} observations; pairs need as many")
+        if len(before) == 0:
+            raise ValueError("the smoothness term needs at least one pair of consecutive observations")
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+        self.mean, self.before, self.after = mean, before, after
+        self.weight, self.batch_size, self.rng = float(weight), int(batch_size), rng
+        self._order = torch.empty(0, dtype=torch.long)
+        self.distances: list[float] = []  # one per call, without the weight
+
+    def __call__(self) -> torch.Tensor:
+        if len(self._order) == 0:
+            self._order = torch.as_tensor(self.rng.permutation(len(self.before)), device=self.before.device)
+        batch, self._order = self._order[: self.batch_size], self._order[self.batch_size :]
+        distance = torch.mean(torch.abs(self.mean(self.after[batch]) - self.mean(self.before[batch])))
+        self.distances.append(float(distance.detach()))
+        return self.weight * distance
+
+    @property
+    def mean_distance(self) -> float:
+        """The mean distance (without the weight) over the calls so far; NaN before the first."""
+        return float(np.mean(self.distances)) if self.distances else float("nan")
+
+
 class SmoothPPO(PPO):
-    """SB3's PPO with CAPS' temporal smoothness term (module docstring).
+    """SB3's PPO with CAPS' temporal smoothness term in its loss (module docstring).
 
     Args:
         temporal_smoothness: λ ≥ 0, the weight of the term; 0 (the default) is PPO.
@@ -72,24 +127,35 @@ class SmoothPPO(PPO):
         super().__init__(*args, **kwargs)
 
     def train(self) -> None:
-        """PPO's update, then (λ > 0) one pass of the smoothness term over the same rollout."""
-        pairs = consecutive_pairs(self.rollout_buffer) if self.temporal_smoothness > 0 else None
-        super().train()
-        if pairs is not None and len(pairs[0]):
-            self.logger.record("train/temporal_smoothness_loss", self._smoothness_pass(*pairs))
+        """PPO's update; with λ > 0 each of its optimizer steps also descends the smoothness term.
 
-    def _smoothness_pass(self, before: np.ndarray, after: np.ndarray) -> float:
-        """One pass in minibatches of ``batch_size``; the mean distance before each step."""
-        policy = self.policy
-        policy.set_training_mode(True)
+        SB3's ``PPO.train`` zeroes the optimizer's gradients right before the backward pass of each
+        minibatch's loss, then clips and steps. For the length of this update the optimizer's
+        ``zero_grad`` is followed by the backward pass of the term on the next minibatch of pairs,
+        so its gradient adds to PPO's before the one clipping and the one step.
+        """
+        if self.temporal_smoothness == 0:
+            super().train()
+            return
+        before, after = (torch.as_tensor(side, device=self.device) for side in consecutive_pairs(self.rollout_buffer))
+        if len(before) == 0:  # every entry's episode restarted at every step: nothing to pull together
+            super().train()
+            return
         rng = np.random.default_rng([self.seed or 0, self._n_updates])  # reproducible with the run's seed
-        first, second = (torch.as_tensor(side, device=self.device) for side in (before, after))
-        distance = smoothness_pass(
-            self._mean_action, first, second, self.temporal_smoothness, self.batch_size,
-            policy.optimizer, policy.parameters(), self.max_grad_norm, rng,
-        )  # fmt: skip
-        policy.set_training_mode(False)
-        return distance
+        term = SmoothnessTerm(self._mean_action, before, after, self.temporal_smoothness, self.batch_size, rng)
+        optimizer = self.policy.optimizer
+        zero_grad = optimizer.zero_grad
+
+        def zero_grad_then_add_the_term(set_to_none: bool = True) -> None:
+            zero_grad(set_to_none=set_to_none)
+            term().backward()
+
+        optimizer.zero_grad = zero_grad_then_add_the_term  # type: ignore[method-assign]
+        try:
+            super().train()
+        finally:
+            del optimizer.zero_grad  # the instance attribute: the class's method again
+        self.logger.record("train/temporal_smoothness_loss", term.mean_distance)
 
     def _mean_action(self, obs: torch.Tensor) -> torch.Tensor:
         """The Gaussian's mean for a batch of observations (with gradients)."""
@@ -97,37 +163,3 @@ class SmoothPPO(PPO):
         if not isinstance(dist, torch.distributions.Normal):
             raise TypeError(f"temporal_smoothness needs a Gaussian policy (Box actions), got {type(dist).__name__}")
         return dist.mean
-
-
-def smoothness_pass(
-    mean: Callable[[torch.Tensor], torch.Tensor],
-    before: torch.Tensor,
-    after: torch.Tensor,
-    weight: float,
-    batch_size: int,
-    optimizer: torch.optim.Optimizer,
-    parameters: Iterable[torch.nn.Parameter],
-    max_grad_norm: float,
-    rng: np.random.Generator,
-) -> float:
-    """One pass of ``weight · mean |mean(after) − mean(before)|`` over the pairs, in shuffled minibatches.
-
-    ``before[i]`` and ``after[i]`` are consecutive observations of one agent in one episode (any trailing
-    shape ``mean`` takes); each minibatch of ``batch_size`` pairs is one step of ``optimizer`` with the
-    gradient norm of ``parameters`` clipped to ``max_grad_norm``, as the PPO steps before it. Returns the
-    mean over minibatches of the distance before each step (without the weight).
-    """
-    if len(before) != len(after):
-        raise ValueError(f"before and after hold {len(before)} and {len(after)} observations; pairs need as many")
-    parameters = list(parameters)
-    order = torch.as_tensor(rng.permutation(len(before)), device=before.device)
-    distances = []
-    for start in range(0, len(order), batch_size):
-        batch = order[start : start + batch_size]
-        distance = torch.mean(torch.abs(mean(after[batch]) - mean(before[batch])))
-        optimizer.zero_grad()
-        (weight * distance).backward()
-        torch.nn.utils.clip_grad_norm_(parameters, max_grad_norm)
-        optimizer.step()
-        distances.append(float(distance.detach()))
-    return float(np.mean(distances)) if distances else float("nan")

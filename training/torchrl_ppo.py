@@ -94,16 +94,15 @@ first and with all of them from half the budget on. The evaluation always
 uses the scenario's. ``progress.csv`` logs the spread.
 
 ``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
-(:mod:`training.smoothness`): after each batch's PPO epochs, one more pass in
-minibatches of ``minibatch_size`` formation-steps minimizes ``λ · mean
-|μ(o') − μ(o)|`` over every vessel's pair of an observation ``o`` and the
-next one ``o'`` of the same episode (the batch's ``("next", "vessel",
-"observation")``, so the last observation of an episode still pairs with the
-one before it), μ the deterministic action before clipping: the Gaussian's
-mean in the env's units with ``distribution: normal``, ``tanh`` of it with
-``tanh_normal``. Rewards, the logged returns and the evaluation are
-unchanged; ``progress.csv`` logs the mean distance before each pass
-(``smoothness``, empty at λ = 0).
+(:mod:`training.smoothness`): each minibatch's PPO loss gains ``λ · mean
+|μ(o') − μ(o)|`` over ``minibatch_size`` formation-steps' worth of every
+vessel's pairs of an observation ``o`` and the next one ``o'`` of the same
+episode (the batch's ``("next", "vessel", "observation")``, so the last
+observation of an episode still pairs with the one before it), μ the
+deterministic action before clipping: the Gaussian's mean in the env's units
+with ``distribution: normal``, ``tanh`` of it with ``tanh_normal``. Rewards,
+the logged returns and the evaluation are unchanged; ``progress.csv`` logs the
+mean distance over the batch's steps (``smoothness``, empty at λ = 0).
 
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
@@ -709,8 +708,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         rate = learning_rate(cfg, time.perf_counter() - begin, frames)
         for group in optim.param_groups:
             group["lr"] = rate
-        kl, updates = _ppo_epochs(loss, optim, buffer, cfg)
-        smoothness = _smoothness(actor, optim, data, cfg, len(rows)) if cfg["temporal_smoothness"] > 0 else ""
+        term = _smoothness_term(actor, data, cfg, len(rows)) if cfg["temporal_smoothness"] > 0 else None
+        kl, updates = _ppo_epochs(loss, optim, buffer, cfg, term)
+        smoothness = term.mean_distance if term is not None else ""
         if normalize:  # after the epochs: each batch trains with the statistics it was collected with
             for net in (actor.module[0].module, critic.module):
                 net[0].update(data.get(("vessel", "observation")))
@@ -781,8 +781,11 @@ def initial_spread(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
     return curriculum_spread(cfg["initial_state_curriculum"], budget_used(cfg, elapsed, frames))
 
 
-def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:
+def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any], term: Any = None) -> tuple[float, int]:
     """The PPO epochs on one batch; returns the last minibatch's approximate KL and the number of updates.
+
+    ``term`` (a :class:`training.smoothness.SmoothnessTerm`, or None) adds the temporal smoothness term of its
+    next minibatch of pairs to each minibatch's loss.
 
     With ``target_kl`` set, the epochs stop at the first minibatch whose ``|mean kl_approx|`` (between the
     policy that collected the batch and the current one, before this minibatch's step) exceeds 1.5 ×
@@ -800,6 +803,8 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tupl
             if limit is not None and kl > limit:  # as SB3: this minibatch is not stepped on
                 return kl, updates
             total = values["loss_objective"] + values["loss_critic"] + values["loss_entropy"]
+            if term is not None:
+                total = total + term()
             optim.zero_grad()
             total.backward()
             torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
@@ -808,11 +813,11 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tupl
     return kl, updates
 
 
-def _smoothness(actor: Any, optim: Any, data: Any, cfg: dict[str, Any], iteration: int) -> float:
-    """The ``temporal_smoothness`` pass over one batch (module docstring); the mean distance before its steps."""
+def _smoothness_term(actor: Any, data: Any, cfg: dict[str, Any], iteration: int) -> Any:
+    """The ``temporal_smoothness`` term over one batch's pairs (module docstring), for :func:`_ppo_epochs`."""
     import torch
 
-    from training.smoothness import smoothness_pass
+    from training.smoothness import SmoothnessTerm
 
     net = actor.module[0].module  # observation -> (loc, scale), in the env's units (action_scale included)
     squash = torch.tanh if cfg["distribution"] == "tanh_normal" else (lambda loc: loc)
@@ -825,10 +830,7 @@ def _smoothness(actor: Any, optim: Any, data: Any, cfg: dict[str, Any], iteratio
         data.get(key).flatten(0, -3) for key in (("vessel", "observation"), ("next", "vessel", "observation"))
     )
     rng = np.random.default_rng([cfg["seed"], iteration])  # reproducible with the run's seed
-    return smoothness_pass(
-        mean, before, after, cfg["temporal_smoothness"], cfg["minibatch_size"],
-        optim, actor.parameters(), cfg["max_grad_norm"], rng,
-    )  # fmt: skip
+    return SmoothnessTerm(mean, before, after, cfg["temporal_smoothness"], cfg["minibatch_size"], rng)
 
 
 def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
