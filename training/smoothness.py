@@ -25,7 +25,7 @@ reward, the returns the run logs and every evaluation are unchanged. The
 run's TensorBoard gets ``train/temporal_smoothness_loss`` (the mean distance
 over the update's steps, without λ).
 
-Until commit 5d678b0 the term was a separate pass of optimizer steps after
+Before commit e841afb the term was a separate pass of optimizer steps after
 PPO's epochs. Adam normalizes each parameter's step by the running size of
 its gradients, so the weight of a loss stepped on its own barely sets the
 size of the step: λ = 1 and λ = 0.1 collapsed the same run alike
