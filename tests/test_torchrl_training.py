@@ -385,6 +385,39 @@ def test_the_temporal_smoothness_term_pulls_the_deterministic_actions_of_consecu
     assert scale and all(torch.equal(p, q) for p, q in zip(scale, scale_parameters(), strict=True))
 
 
+def test_the_smoothness_term_joins_each_ppo_step_instead_of_taking_steps_of_its_own():
+    # a stand-in PPO loss (a quadratic in one weight) and a term on the same weight: 2 epochs × 4 minibatches
+    # are 8 optimizer steps with the term or without it, and the term is evaluated once in each
+    from training.smoothness import SmoothnessTerm
+
+    weight = torch.nn.Parameter(torch.ones(1, 2))
+    zero = torch.zeros(())
+
+    def ppo_loss(_batch):
+        return TensorDict({"loss_objective": (weight**2).sum(), "loss_critic": zero, "loss_entropy": zero}, [])
+
+    class Buffer:
+        def sample(self):
+            return None
+
+    cfg = {"epochs": 2, "frames_per_batch": 64, "minibatch_size": 16, "target_kl": None, "max_grad_norm": 1.0}
+    ppo_loss.parameters = lambda: [weight]  # type: ignore[attr-defined]
+
+    def optimizer_steps(term):
+        optim = torch.optim.SGD([weight], lr=0.01)
+        counted = []
+        step = optim.step
+        optim.step = lambda: counted.append(step())  # type: ignore[method-assign]
+        _, updates = trainer._ppo_epochs(ppo_loss, optim, Buffer(), cfg, term)
+        return updates, len(counted)
+
+    obs = torch.randn(40, 2)
+    term = SmoothnessTerm(lambda o: o @ weight.T, obs, obs + 1.0, 0.5, 16, np.random.default_rng(0))
+    steps = {"plain": optimizer_steps(None), "term": optimizer_steps(term)}
+    assert len(term.distances) == 8
+    assert steps["plain"] == steps["term"] == (8, 8)
+
+
 def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_on(tmp_path):
     # the term is part of the PPO loss: the saved policy of a run with it differs from the same seed's run
     # without it, which the same seed reproduces exactly (one machine, one build)
