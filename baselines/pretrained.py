@@ -79,6 +79,8 @@ PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 FORMAT = 1
 KINDS = ("mlp", "slots")
 SQUASHES = ("clip", "tanh")
+#: What an :class:`MLPPolicy` reads: the observation itself, or :func:`predicted_inputs` of it.
+INPUTS = ("raw", "predicted")
 
 
 @dataclass(frozen=True)
@@ -127,6 +129,8 @@ class MLPPolicy(BatchPolicy):
         clip: and its bound.
         squash: ``clip`` (to [−1, 1]) or ``tanh``, applied to the first ``action_dim`` outputs.
         features: the weights of :func:`slot_features` (a ``slots`` network: any number of slots), or None.
+        inputs: ``raw``, or ``predicted``: the network reads :func:`predicted_inputs` of the observation (before
+            the normalization above; ``training.torchrl_ppo``'s ``inputs: predicted``).
     """
 
     def __init__(
@@ -139,9 +143,13 @@ class MLPPolicy(BatchPolicy):
         squash: str,
         action_dim: int,
         features: dict[str, np.ndarray] | None = None,
+        inputs: str = "raw",
     ) -> None:
         if squash not in SQUASHES:
             raise ValueError(f"squash must be one of {list(SQUASHES)}, got {squash!r}")
+        if inputs not in INPUTS:
+            raise ValueError(f"inputs must be one of {list(INPUTS)}, got {inputs!r}")
+        self.inputs = inputs
         self.weights = [np.asarray(w, dtype=np.float64) for w in weights]
         self.biases = [np.asarray(b, dtype=np.float64) for b in biases]
         self.mean = np.asarray(mean, dtype=np.float64)
@@ -159,6 +167,8 @@ class MLPPolicy(BatchPolicy):
         obs = np.asarray(obs, dtype=np.float64)
         if self.observation_dim is not None and obs.shape[-1] != self.observation_dim:
             raise ValueError(f"observations of size {obs.shape[-1]} given, this policy takes {self.observation_dim}")
+        if self.inputs == "predicted":
+            obs = predicted_inputs(obs)
         x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
         if self.features is not None:
             x = slot_features(x, self.features)
@@ -173,6 +183,8 @@ class MLPPolicy(BatchPolicy):
     def arrays(self) -> dict[str, np.ndarray]:
         """The arrays of its file."""
         out = {"mean": self.mean, "std": self.std, "clip": np.array(self.clip), "squash": np.array(self.squash)}
+        if self.inputs != "raw":  # files of raw-input policies stay as they were
+            out["inputs"] = np.array(self.inputs)
         for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             out[f"w{k}"], out[f"b{k}"] = w, b
         for name, value in (self.features or {}).items():
@@ -192,6 +204,7 @@ class MLPPolicy(BatchPolicy):
             str(arrays["squash"]),
             action_dim,
             features or None,
+            str(arrays["inputs"]) if "inputs" in arrays else "raw",
         )
 
 
@@ -219,19 +232,35 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
     return out / OWN_SCALE
 
 
+def _own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of :func:`predicted_inputs`."""
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
+        raise ValueError(f"an observation of size {obs.shape[-1]} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
+    own = obs[..., :OWN_SIZE]
+    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
+    slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
+    return own_inputs(own), slots / SLOT_SCALE
+
+
+def predicted_inputs(obs: np.ndarray) -> np.ndarray:
+    """The slot network's fixed input map, keeping the observation's layout ``(..., dim) → (..., dim)``.
+
+    Each slot's Δθ predicted to now from the message's velocity and age (as ``reference:extrapolate``),
+    κ·D_y for the lane offset (:func:`own_inputs`), every entry divided by :data:`OWN_SCALE` or
+    :data:`SLOT_SCALE`. ``training.inputs.PredictedInputs`` is the same map in torch (``training.torchrl_ppo``'s
+    ``inputs: predicted``).
+    """
+    own, slots = _own_and_slots(obs)
+    return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
+
+
 def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
     """``training.slot_policy.SlotFeatures`` in numpy (float64); ``weights``: ``{name: array}``, layers ``x @ w + b``.
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``.
     """
-    obs = np.asarray(obs, dtype=np.float64)
-    if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
-        raise ValueError(f"an observation of size {obs.shape[-1]} is not 10 + 4·slots")
-    own = obs[..., :OWN_SIZE]
-    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
-    slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
-    own = own_inputs(own)
-    slots = slots / SLOT_SCALE
+    own, slots = _own_and_slots(obs)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], OWN_SIZE)), slots], axis=-1)
     h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
@@ -381,12 +410,13 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     policy, config = load_torch_policy(run)
     trunk = policy.trunk
     dim = policy.observation_dim
-    if len(trunk) == 2:
+    inputs = str(config.get("inputs", "raw"))
+    if len(trunk) == 2 and inputs == "raw":  # a running norm, then the MLP
         norm = trunk[0]
         mean = norm.mean.double().numpy()
         std = np.sqrt(norm.var.double().numpy() + 1e-8)
         clip = 10.0
-    else:
+    else:  # the MLP alone, or the fixed input map (MLPPolicy's inputs="predicted") and the MLP
         mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
     mlp = trunk[-1]
     # a MultiAgentMLP with shared parameters keeps them in ``params`` (keys "0", "2", ...: the Linear layers'
@@ -404,7 +434,7 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     weights[-1][:, : policy.action_dim] *= units
     biases[-1][: policy.action_dim] *= units
     squash = "tanh" if policy.distribution == "tanh_normal" else "clip"
-    return MLPPolicy(weights, biases, mean, std, clip, squash, policy.action_dim), config
+    return MLPPolicy(weights, biases, mean, std, clip, squash, policy.action_dim, inputs=inputs), config
 
 
 def export_run(

@@ -47,7 +47,8 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from training.inputs import predicted_inputs
 
 __all__ = ["SlotFeatures"]
 
@@ -58,7 +59,7 @@ class SlotFeatures(BaseFeaturesExtractor):
     def __init__(self, observation_space: spaces.Box, hidden: int = 64) -> None:
         dim = int(observation_space.shape[0])
         if dim < OWN_SIZE or (dim - OWN_SIZE) % SLOT_SIZE:
-            raise ValueError(f"an observation of size {dim} is not 10 + 4·slots")
+            raise ValueError(f"an observation of size {dim} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
         super().__init__(observation_space, features_dim=3 * hidden)
         self.hidden = hidden
         self.own_scale: torch.Tensor
@@ -71,16 +72,8 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        own = observations[..., :OWN_SIZE]
-        slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE)
-        # Δθ predicted to now from each message's velocity and age (baselines.reference.predicted_coordination_error)
-        e, psi, u, v = own[..., 0], own[..., 1], own[..., 2], own[..., 3]
-        metric = 1.0 - own[..., CURVATURE] * (own[..., LANE_OFFSET] + e)
-        x_dot_own = (u * torch.cos(psi) - v * torch.sin(psi)) / metric
-        predicted = slots[..., 1] - (x_dot_own.unsqueeze(-1) - slots[..., 2]) * slots[..., 3]
-        slots = torch.cat([slots[..., :1], predicted.unsqueeze(-1), slots[..., 2:]], dim=-1) / self.slot_scale
-        bent = own[..., CURVATURE : CURVATURE + 1] * own[..., LANE_OFFSET : LANE_OFFSET + 1]  # κ·D_y, not D_y
-        own = torch.cat([own[..., :LANE_OFFSET], bent, own[..., LANE_OFFSET + 1 :]], dim=-1) / self.own_scale
+        # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
+        own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], OWN_SIZE), slots], dim=-1)
         messages = self.message(pairs) * heard

@@ -38,6 +38,7 @@ nest; unknown keys and bad values are refused by name):
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
 | ``temporal_smoothness`` | λ ≥ 0 of CAPS' temporal term on the policy's mean (below); 0: PPO itself | 0.0 |
+| ``inputs`` | ``raw``, or ``predicted``: the networks read the slot network's fixed input map (below) | ``raw`` |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
@@ -73,6 +74,19 @@ advantages of each minibatch; ``normalize_reward`` divides the rewards the
 critic and the advantages see by the running standard deviation of the
 discounted return (clipped to ±10). The env's reward, the logged
 ``mean_reward`` and the evaluation are unchanged.
+
+``inputs: predicted`` puts the slot network's fixed input map
+(:mod:`training.inputs`, parameter-free) in front of the actor and the critic:
+each slot's Δθ is predicted to now from the message's velocity and age,
+``Δθ − ẋ_i·age`` (what ``reference:extrapolate`` does; the same Δθ over an
+ideal link), the lane offset D_y is read as κ·D_y, and every entry is
+divided by a fixed scale (metres by 50, speeds by 5, ages by 10 s, …). Over
+acoustic links a slot holds a position up to 12 s old next to its age in
+seconds; an MLP on the raw entries would have to find the product of two of
+its inputs by itself. It replaces ``normalize_observations`` (both together
+are refused). The saved policy and its numpy export
+(``baselines.pretrained.MLPPolicy`` with ``inputs="predicted"``) apply the
+same map.
 
 ``train_reward`` shapes the reward the learner trains on, nothing else: the
 training env's reward is the scenario's with these fields replaced (for
@@ -205,6 +219,7 @@ DEFAULTS: dict[str, Any] = {
     "epochs": 4,
     "minibatch_size": 1600,
     "temporal_smoothness": 0.0,
+    "inputs": "raw",
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
@@ -218,6 +233,7 @@ ALGOS = ("mappo", "ippo")
 LR_SCHEDULES = ("constant", "linear")
 DISTRIBUTIONS = ("tanh_normal", "normal")
 SCALES = ("state_dependent", "state_independent")
+INPUTS = ("raw", "predicted")
 POLICY_FILE = "policy.pt"
 #: Seconds of training between the intermediate saves of ``policy.pt`` and ``progress.csv``.
 SAVE_SECONDS = 60.0
@@ -246,6 +262,13 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
+    if cfg["inputs"] not in INPUTS:
+        raise TrainConfigError(f"inputs must be one of {list(INPUTS)}, got {cfg['inputs']!r}")
+    if cfg["inputs"] == "predicted" and cfg["normalize_observations"]:
+        raise TrainConfigError(
+            "inputs: predicted divides by fixed scales; normalize_observations: true would normalize again"
+            " (set one of them)"
+        )
     if cfg["scale"] not in SCALES:
         raise TrainConfigError(f"scale must be one of {list(SCALES)}, got {cfg['scale']!r}")
     if cfg["distribution"] not in DISTRIBUTIONS:
@@ -420,8 +443,9 @@ def _policy_network(
     action_head_gain: float | None = None,
     scale: str = "state_dependent",
     action_scale: float | Sequence[float] = 1.0,
+    inputs: str = "raw",
 ) -> Any:
-    """The shared actor: [running norm →] ``MultiAgentMLP`` (shared parameters) → loc, scale → the distribution.
+    """The shared actor: [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the distribution.
 
     The scale is a biased softplus of the network's output, equal to ``initial_scale`` where that output is 0
     (TorchRL's ``biased_softplus``), so a freshly initialized policy explores with about that deviation.
@@ -433,6 +457,7 @@ def _policy_network(
     TensorDict's ``AddStateIndependentNormalScale``).
     With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
     the Gaussian over the network's units becomes one over the env's (module docstring).
+    With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation.
     """
     import math
 
@@ -446,7 +471,7 @@ def _policy_network(
     if rescaled and distribution != "normal":
         raise ValueError(f"action_scale {action_scale!r} needs distribution 'normal' (tanh squashes before scaling)")
     net = nn.Sequential(
-        *([running_norm(obs_dim)] if normalize else []),
+        *_input_modules(obs_dim, normalize, inputs),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=action_dim if scale == "state_independent" else 2 * action_dim,
@@ -511,13 +536,24 @@ def _action_units(units: np.ndarray) -> Any:
     return ActionUnits()
 
 
-def _critic_network(obs_dim: int, n_agents: int, hidden: list[int], centralized: bool, normalize: bool) -> Any:
+def _input_modules(obs_dim: int, normalize: bool, inputs: str) -> list[Any]:
+    """What a network puts before its MLP: the running norm, the fixed input map (``inputs: predicted``), or nothing."""
+    if inputs == "predicted":
+        from training.inputs import PredictedInputs
+
+        return [PredictedInputs()]
+    return [running_norm(obs_dim)] if normalize else []
+
+
+def _critic_network(
+    obs_dim: int, n_agents: int, hidden: list[int], centralized: bool, normalize: bool, inputs: str = "raw"
+) -> Any:
     from tensordict.nn import TensorDictModule
     from torch import nn
     from torchrl.modules import MultiAgentMLP
 
     net = nn.Sequential(
-        *([running_norm(obs_dim)] if normalize else []),
+        *_input_modules(obs_dim, normalize, inputs),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=1,
@@ -598,9 +634,9 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         config = json.loads(saved["config"])
         # runs saved before these keys trained with their defaults
         initial, kind = float(config.get("initial_scale", 1.0)), str(config.get("scale", "state_dependent"))
-        units = config.get("action_scale", 1.0)
+        units, inputs = config.get("action_scale", 1.0), str(config.get("inputs", "raw"))
         sizes = int(dims["observation"]), int(dims["action"])
-        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind, units)
+        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind, units, inputs)
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
@@ -652,8 +688,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
     exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"], cfg["action_scale"]
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration)
-    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize)
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, cfg["inputs"])
+    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"])
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
