@@ -157,6 +157,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
         ("scale=fixed", "scale must be one of ['state_dependent', 'state_independent'], got 'fixed'"),
+        ("inputs=scaled", "inputs must be one of ['raw', 'predicted'], got 'scaled'"),
         ("action_head_gain=-1", "action_head_gain must be > 0, got -1"),
         ("action_scale=0", "action_scale entries must be numbers in (0, 1], got 0"),
         ("action_scale=[2]", "action_scale entries must be numbers in (0, 1], got [2]"),
