@@ -58,7 +58,7 @@ from baselines.reference import predicted_coordination_error
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -235,8 +235,7 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
 def _own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of :func:`predicted_inputs`."""
     obs = np.asarray(obs, dtype=np.float64)
-    if obs.shape[-1] < OWN_SIZE or (obs.shape[-1] - OWN_SIZE) % SLOT_SIZE:
-        raise ValueError(f"an observation of size {obs.shape[-1]} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
+    slot_count(obs.shape[-1])
     own = obs[..., :OWN_SIZE]
     slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
     slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)

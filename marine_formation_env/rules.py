@@ -44,6 +44,7 @@ __all__ = [
     "outside_envelope",
     "outside_workspace",
     "rk4_combine",
+    "slot_count",
     "slot_differences",
     "terminal_term",
 ]
@@ -72,6 +73,17 @@ CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = 7, 8, 9
 LOOKAHEAD = 100.0
 #: Offsets inside a slot.
 LINK, COORDINATION, VELOCITY, AGE = 0, 1, 2, 3
+
+
+def slot_count(dim: int) -> int:
+    """How many slots an observation of ``dim`` entries holds (``OWN_SIZE + SLOT_SIZE · K``).
+
+    Raises:
+        ValueError: ``dim`` is not of that form (names the size).
+    """
+    if dim < OWN_SIZE or (dim - OWN_SIZE) % SLOT_SIZE:
+        raise ValueError(f"an observation of size {dim} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
+    return (dim - OWN_SIZE) // SLOT_SIZE
 
 
 def rk4_combine(x: Any, k1: Any, k2: Any, k3: Any, k4: Any, h: float) -> Any:

@@ -14,13 +14,25 @@ from baselines.engine import episode_reports
 from baselines.reference import ReferencePolicy
 from marine_formation_env import parallel_env
 from marine_formation_env.errors import ConfigError
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
 
 
 def test_the_default_is_one_slot_per_other_vessel():
     env = parallel_env("paper")
     assert env.config.observation_slots == 2
     assert env.observation_space("vessel_0").shape == (OWN_SIZE + 2 * SLOT_SIZE,)
+
+
+@pytest.mark.parametrize(("n", "slots"), [(3, None), (5, None), (4, 9)])
+def test_slot_count_reads_the_slots_back_from_an_observation_size(n, slots):
+    env = parallel_env("paper", n_vessels=n, topology="ring", observation_slots=slots)
+    assert slot_count(env.observation_space("vessel_0").shape[0]) == (n - 1 if slots is None else slots)
+
+
+@pytest.mark.parametrize("dim", [0, OWN_SIZE - 1, OWN_SIZE + 1, OWN_SIZE + SLOT_SIZE + 3])
+def test_slot_count_refuses_a_size_that_is_not_own_part_plus_whole_slots(dim):
+    with pytest.raises(ValueError, match=rf"an observation of size {dim} is not {OWN_SIZE} \+ {SLOT_SIZE}·slots"):
+        slot_count(dim)
 
 
 @pytest.mark.parametrize(("scenario", "n"), [("paper", 4), ("acoustic", 4), ("circle", 3)])

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
 
 __all__ = ["PredictedInputs", "predicted_inputs"]
 
@@ -37,9 +37,7 @@ def predicted_inputs(
     Raises:
         ValueError: the last dimension is not ``OWN_SIZE + SLOT_SIZE · K``.
     """
-    dim = observations.shape[-1]
-    if dim < OWN_SIZE or (dim - OWN_SIZE) % SLOT_SIZE:
-        raise ValueError(f"an observation of size {dim} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
+    slot_count(observations.shape[-1])
     own = observations[..., :OWN_SIZE]
     slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE)
     e, psi, u, v = own[..., 0], own[..., 1], own[..., 2], own[..., 3]

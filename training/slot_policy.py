@@ -47,7 +47,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
 from training.inputs import predicted_inputs
 
 __all__ = ["SlotFeatures"]
@@ -57,9 +57,7 @@ class SlotFeatures(BaseFeaturesExtractor):
     """Features ``[ψ(own), Σ heard messages, mean heard message]`` of size ``3 · hidden`` (module docstring)."""
 
     def __init__(self, observation_space: spaces.Box, hidden: int = 64) -> None:
-        dim = int(observation_space.shape[0])
-        if dim < OWN_SIZE or (dim - OWN_SIZE) % SLOT_SIZE:
-            raise ValueError(f"an observation of size {dim} is not {OWN_SIZE} + {SLOT_SIZE}·slots")
+        slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
         super().__init__(observation_space, features_dim=3 * hidden)
         self.hidden = hidden
         self.own_scale: torch.Tensor
