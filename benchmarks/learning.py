@@ -65,8 +65,20 @@ def config_file(level: str, config_path: Path | None = None) -> Path:
     return config_path or CONFIG_DIR / f"paper_{level}_ppo.yaml"
 
 
+def config_level(config: dict[str, Any], level: str | None, path: Path) -> str:
+    """The action level ``config`` trains at; ``level`` (``--level``), if given, must be that one.
+
+    Raises:
+        ValueError: ``level`` names another level than the config's ``env_kwargs.action_level``.
+    """
+    own = str(config.get("env_kwargs", {}).get("action_level", "speed"))
+    if level is not None and level != own:
+        raise ValueError(f"--level {level!r}, but {path} trains at action_level {own!r}")
+    return own
+
+
 def run_benchmark(
-    level: str,
+    level: str | None,
     minutes: float,
     seed: int,
     episodes: int,
@@ -78,18 +90,23 @@ def run_benchmark(
 ) -> dict[str, Any]:
     """Train for ``minutes`` of wall time at ``level`` and compare with the reference (module docstring).
 
+    ``level`` picks the default config; with ``config_path`` it may be ``None`` (the config's own
+    ``action_level``, which the report records) and is refused if it names another level.
     ``vessel_steps``: also stop after that many vessel-steps (a budget that does
     not depend on the machine's load; the wall-clock budget still applies).
     ``overrides``: config keys replaced before training (``--set``, dots nest),
     recorded in the run folder's ``config.yaml``.
     """
-    if level not in ACTION_LEVELS:
+    if level is not None and level not in ACTION_LEVELS:
         raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
-    path = config_file(level, config_path)
+    if level is None and config_path is None:
+        level = "speed"
+    path = config_file(level or "speed", config_path)
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
     ceiling = 10**9 if vessel_steps is None else int(vessel_steps)
     config = apply_overrides(load_config(path), overrides or {})
+    level = config_level(config, level, path)
     resolved = validate(apply_overrides(config, {"n_timesteps": ceiling, "eval_freq": 0}))
     start = time.perf_counter()
     model = train(
@@ -158,7 +175,12 @@ def format_report(report: dict[str, Any]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = ArgumentParser(prog="python -m benchmarks.learning", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--level", choices=list(ACTION_LEVELS), default="speed")
+    parser.add_argument(
+        "--level",
+        choices=list(ACTION_LEVELS),
+        default=None,
+        help="picks training/configs/paper_<level>_ppo.yaml (default speed); with --config, must be its level",
+    )
     parser.add_argument("--minutes", type=float, default=15.0, help="wall-clock training budget (default 15)")
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="training seed (default 0)")
     parser.add_argument(
@@ -179,12 +201,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not args.minutes > 0:
         parser.error(f"--minutes must be > 0, got {args.minutes}")
-    out = args.out or Path("runs") / f"benchmark_{args.level}"
-    try:  # a bad file or override is refused here, in one line, before any training
+    try:  # a bad file, override or level is refused here, in one line, before any training
         overrides = parse_overrides(args.set, nest=False)
-        validate(apply_overrides(load_config(config_file(args.level, args.config)), overrides))
+        path = config_file(args.level or "speed", args.config)
+        config = validate(apply_overrides(load_config(path), overrides))
+        level = config_level(config, args.level, path)
     except (TrainConfigError, ValueError, OSError) as err:
         report_error(parser.prog, str(err))
+    out = args.out or Path("runs") / f"benchmark_{level}"
     report = run_benchmark(
         args.level, args.minutes, args.seed, args.episodes, out, args.config, not args.quiet, args.vessel_steps,
         overrides,

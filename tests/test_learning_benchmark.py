@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 import yaml
 
@@ -26,6 +28,23 @@ def test_a_bad_override_is_refused_by_name_before_any_training(tmp_path, capsys,
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not (tmp_path / "run").exists()
+
+
+def test_a_level_that_is_not_the_configs_is_refused_before_any_training(tmp_path, capsys):
+    config = str(learning.CONFIG_DIR / "acoustic_speed_ppo.yaml")
+    with pytest.raises(SystemExit) as stop:
+        learning.main(["--level", "guidance", "--config", config, "--minutes", "1", "--out", str(tmp_path / "run")])
+    assert stop.value.code == 2
+    assert f"--level 'guidance', but {config} trains at action_level 'speed'" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_report_names_the_level_of_the_config_it_trained(tmp_path):
+    out = tmp_path / "run"
+    args = ["--config", str(learning.CONFIG_DIR / "paper_guidance_ppo.yaml"), "--minutes", "1", "--vessel-steps", "384"]
+    args += ["--episodes", "1", "--out", str(out), "--quiet", "--set", "n_envs=2", "--set", "n_steps=64"]
+    assert learning.main([*args, "--set", "batch_size=64"]) == 0
+    assert json.loads((out / "benchmark.json").read_text())["level"] == "guidance"
 
 
 def test_an_override_reaches_the_run_and_its_recorded_config(tmp_path):
