@@ -99,8 +99,6 @@ def run_benchmark(
     """
     if level is not None and level not in ACTION_LEVELS:
         raise ValueError(f"unknown level {level!r}; choose one of {list(ACTION_LEVELS)}")
-    if level is None and config_path is None:
-        level = "speed"
     path = config_file(level or "speed", config_path)
     # The budget stops training; the step count is only a ceiling. No periodic evaluation:
     # its time would count against the budget.
