@@ -235,9 +235,9 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
 def _own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of :func:`predicted_inputs`."""
     obs = np.asarray(obs, dtype=np.float64)
-    slot_count(obs.shape[-1])
+    k = slot_count(obs.shape[-1])
     own = obs[..., :OWN_SIZE]
-    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], -1, SLOT_SIZE).copy()
+    slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], k, SLOT_SIZE).copy()
     slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
     return own_inputs(own), slots / SLOT_SCALE
 

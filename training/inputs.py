@@ -37,9 +37,9 @@ def predicted_inputs(
     Raises:
         ValueError: the last dimension is not ``OWN_SIZE + SLOT_SIZE · K``.
     """
-    slot_count(observations.shape[-1])
+    k = slot_count(observations.shape[-1])
     own = observations[..., :OWN_SIZE]
-    slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], -1, SLOT_SIZE)
+    slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], k, SLOT_SIZE)
     e, psi, u, v = own[..., 0], own[..., 1], own[..., 2], own[..., 3]
     metric = 1.0 - own[..., CURVATURE] * (own[..., LANE_OFFSET] + e)
     x_dot_own = (u * torch.cos(psi) - v * torch.sin(psi)) / metric
