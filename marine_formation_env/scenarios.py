@@ -610,6 +610,11 @@ def _resolve_workspace(
     far as a vessel could go in the horizon, widened by the lanes, the
     corridor and 250 m.
     """
+    if s.workspace is None and not np.isfinite(2.0 * s.u_max * s.horizon + 1e3):
+        raise ConfigError(
+            f"horizon = {s.horizon} s at u_max = {s.u_max} m/s is too long for the default workspace, which must "
+            "hold the whole run: give a shorter horizon or an explicit workspace"
+        )
     if s.workspace is None and not path.is_straight:
         spread = noise.as_array()
         ell = path.closest(nominal[:, 0], nominal[:, 1])

@@ -433,3 +433,13 @@ def test_unknown_keywords_raise_a_type_error_in_pythons_wording(make):
         make(frameskip=4)
     with pytest.raises(ConfigError, match=r"unexpected keyword argument 'colour' \(and \['frameskip'\]\)"):
         make(frameskip=4, colour="red")
+
+
+def test_a_horizon_too_long_for_the_default_workspace_is_refused_by_name():
+    # found by the property test above: u_max · horizon overflowed the default workspace's x extent to inf,
+    # and the refusal named the workspace, which the user never gave
+    with pytest.raises(ConfigError, match=r"horizon = 2\.5e\+307"):
+        make_config("paper", horizon=2.5e307)
+    with pytest.raises(ConfigError, match="horizon"):
+        make_config("paper", path="circle", horizon=1e308)
+    assert make_config("paper", horizon=2.5e307, workspace=(-1e3, 1e4, -500.0, 500.0)).horizon == 2.5e307
