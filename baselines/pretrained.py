@@ -58,7 +58,7 @@ from baselines.reference import predicted_coordination_error
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
+from marine_formation_env.rules import CURVATURE, DESIRED_SPEED, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, SURGE, slot_count
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -257,11 +257,17 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
 def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
     """``training.slot_policy.SlotFeatures`` in numpy (float64); ``weights``: ``{name: array}``, layers ``x @ w + b``.
 
-    ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``.
+    ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
+    ``speed_error_scale`` ``s`` [m/s] if the network reads its own speed error ``tanh((u − u_d)/s)`` as one more
+    own input (``SlotFeatures(speed_error=s)``).
     """
     own, slots = _own_and_slots(obs)
+    if "speed_error_scale" in weights:
+        obs = np.asarray(obs, dtype=np.float64)
+        error = np.tanh((obs[..., SURGE] - obs[..., DESIRED_SPEED]) / weights["speed_error_scale"])
+        own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
-    pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], OWN_SIZE)), slots], axis=-1)
+    pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1])), slots], axis=-1)
     h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
     messages = np.tanh(h @ weights["message_w1"] + weights["message_b1"]) * heard
     total = messages.sum(axis=-2)
@@ -397,6 +403,8 @@ def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
     out["message_w0"], out["message_b0"] = linear(extractor.message[0])
     out["message_w1"], out["message_b1"] = linear(extractor.message[2])
     out["own_w0"], out["own_b0"] = linear(extractor.own[0])
+    if extractor.speed_error is not None:
+        out["speed_error_scale"] = np.array(extractor.speed_error)
     return out
 
 

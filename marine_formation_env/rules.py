@@ -29,6 +29,7 @@ __all__ = [
     "COORDINATION",
     "CURVATURE",
     "CURVATURE_AHEAD",
+    "DESIRED_SPEED",
     "LANE_OFFSET",
     "LINK",
     "LOOKAHEAD",
@@ -36,6 +37,7 @@ __all__ = [
     "OWN_SIZE",
     "SLOT_FEATURES",
     "SLOT_SIZE",
+    "SURGE",
     "VELOCITY",
     "along_track",
     "bounded_cost",
@@ -66,6 +68,8 @@ OWN_FEATURES = (
 SLOT_FEATURES = ("linked", "coordination_error", "velocity_difference", "age")
 OWN_SIZE = len(OWN_FEATURES)
 SLOT_SIZE = len(SLOT_FEATURES)
+#: Offsets inside the own part: the surge speed u and the desired speed u_d.
+SURGE, DESIRED_SPEED = OWN_FEATURES.index("surge"), OWN_FEATURES.index("desired_speed")
 #: Offsets inside the own part: the path's curvature at the vessel's projection, at
 #: :data:`LOOKAHEAD` further along the path, and the vessel's lane offset D_y.
 CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = 7, 8, 9

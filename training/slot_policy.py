@@ -23,7 +23,11 @@ them as a set:
   (20) sums over the in-neighbours, the mean keeps the scale when a vessel
   hears many;
 * the features are ``[ψ(own), sum, mean]``; SB3's ``net_arch`` layers and
-  action head follow, as for ``MlpPolicy``.
+  action head follow, as for ``MlpPolicy``;
+* with ``speed_error = s`` [m/s] (default None: off) the own inputs gain one
+  entry, ``tanh((u − u_d)/s)``: the own speed error, which the fixed scales
+  above leave at 0.024 of an input for a 0.12 m/s offset (u and u_d are each
+  divided by 5 m/s), read steeply near 0 and bounded far from it.
 
 Nothing depends on the number of slots, so the weights trained on teams of 3
 to 6 (observations padded to one length with ``observation_slots``) act in a
@@ -41,13 +45,15 @@ team of 20, whose observations have 19 slots. Config (``training.train``)::
 
 from __future__ import annotations
 
+import math
+
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
+from marine_formation_env.rules import DESIRED_SPEED, OWN_SIZE, SLOT_SIZE, SURGE, slot_count
 from training.inputs import predicted_inputs
 
 __all__ = ["SlotFeatures"]
@@ -56,24 +62,35 @@ __all__ = ["SlotFeatures"]
 class SlotFeatures(BaseFeaturesExtractor):
     """Features ``[ψ(own), Σ heard messages, mean heard message]`` of size ``3 · hidden`` (module docstring)."""
 
-    def __init__(self, observation_space: spaces.Box, hidden: int = 64) -> None:
+    def __init__(self, observation_space: spaces.Box, hidden: int = 64, speed_error: float | None = None) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
+        ok = isinstance(speed_error, int | float) and not isinstance(speed_error, bool) and 0 < speed_error < math.inf
+        if speed_error is not None and not ok:
+            raise ValueError(f"speed_error must be a speed scale > 0 [m/s] or None, got {speed_error!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
         self.hidden = hidden
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
+        self.speed_error = None if speed_error is None else float(speed_error)
+        own_size = OWN_SIZE if speed_error is None else OWN_SIZE + 1
+        if self.speed_error is not None:  # a buffer only when on: networks saved without it still load strictly
+            self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
         self.message = nn.Sequential(
-            nn.Linear(OWN_SIZE + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
+            nn.Linear(own_size + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
-        self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
+        self.own = nn.Sequential(nn.Linear(own_size, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
         own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
+        if self.speed_error is not None:
+            error = observations[..., SURGE : SURGE + 1] - observations[..., DESIRED_SPEED : DESIRED_SPEED + 1]
+            own = torch.cat([own, torch.tanh(error / self.speed_error_scale)], dim=-1)
+        own_size = own.shape[-1]
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
-        pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], OWN_SIZE), slots], dim=-1)
+        pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], own_size), slots], dim=-1)
         messages = self.message(pairs) * heard
         total = messages.sum(dim=-2)
         mean = total / heard.sum(dim=-2).clamp(min=1.0)
