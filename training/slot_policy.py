@@ -71,6 +71,7 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.hidden = hidden
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
+        self.speed_error_scale: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
         self.speed_error = None if speed_error is None else float(speed_error)
