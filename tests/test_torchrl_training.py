@@ -175,6 +175,8 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
             "initial_state_curriculum.until must lie in (0, 1], got 0",
         ),
         ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
+        ("train_dt=0", "train_dt must be > 0, got 0"),
+        ("train_dt=1000", "train_dt = 1000.0: horizon = 400.0 s must be at least one control period dt = 1000.0 s"),
     ],
 )
 def test_bad_configs_are_refused_in_one_line(tmp_path, capsys, item, message):
@@ -281,6 +283,28 @@ def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
     # limit of 1.5e-5) and is stepped on; a step at this rate moves the log-probabilities by far more than the
     # limit, so a later minibatch stops the epochs before its own step
     assert all(1 <= u < 6 for u in updates), updates
+
+
+def test_train_dt_is_the_learner_s_control_period_and_the_evaluation_keeps_the_scenario_s(tmp_path):
+    # horizon 4 s, 10 steps per formation per iteration: at the speed level's 0.5 s each of the 4 formations
+    # ends one episode per iteration (after 8 decisions); at train_dt = 2 s each ends five (2 decisions each)
+    counts = {}
+    for name, extra in (("own", []), ("coarse", ["train_dt=2.0"])):
+        out = tmp_path / name
+        args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+        for item in [*TINY, *extra]:
+            args += ["--set", item]
+        assert main(args) == 0
+        rows = (out / "progress.csv").read_text().splitlines()[1:]
+        counts[name] = [int(float(row.split(",")[5])) for row in rows]  # episodes
+        _, config = load_torch_policy(out)
+        assert "dt" not in config["env_kwargs"]  # the evaluation's scenario is the benchmark's
+        summary = json.loads((out / "evaluation.json").read_text())
+        assert summary["reference_return"] < 0
+    assert counts == {"own": [12, 12], "coarse": [60, 60]}  # the log counts each of the 3 vessels' episodes
+    cfg = resolve({"train_dt": 0.5, "env_kwargs": {"action_level": "force"}}, seed=0)
+    assert trainer.learner_env_kwargs(cfg)["dt"] == 0.5 and "dt" not in cfg["env_kwargs"]
+    assert "dt" not in trainer.learner_env_kwargs(resolve({}, seed=0))
 
 
 def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp_path, monkeypatch):

@@ -42,6 +42,7 @@ nest; unknown keys and bad values are refused by name):
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
+| ``train_dt`` | the learner's control period [s] (below), or null: the scenario's ``dt`` | null |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
 
@@ -106,6 +107,15 @@ noise scaled alike (``MarineFormationTorchEnv.set_initial_spread``), where
 until: 0.5}`` the formations start with a tenth of the scenario's errors at
 first and with all of them from half the budget on. The evaluation always
 uses the scenario's. ``progress.csv`` logs the spread.
+
+``train_dt`` lets the learner decide less often than the scenario's control
+period: its env holds each action for ``train_dt`` seconds (``dt`` of the
+training env only; RK4 substeps as the scenario's rule, at most 0.1 s), so an
+episode is ``horizon / train_dt`` decisions and ``gamma``, ``lmbda`` count per
+``train_dt``. The policy is a memoryless feedback of the observation, so the
+evaluation, ``baselines.evaluate`` and the export run it at the scenario's own
+``dt``, as every other policy. The reward is per second (``−dt·Σ w·c``), so
+returns stay comparable.
 
 ``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
 (:mod:`training.smoothness`): each minibatch's PPO loss gains ``λ · mean
@@ -225,6 +235,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_reward": False,
     "train_reward": {},
     "initial_state_curriculum": None,
+    "train_dt": None,
     "eval_episodes": 4,
     "threads": 1,
 }
@@ -303,7 +314,21 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         )
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
+    if cfg["train_dt"] is not None:
+        cfg["train_dt"] = _positive("train_dt", cfg["train_dt"])
+        try:
+            make_config(cfg["scenario"], **learner_env_kwargs(cfg))
+        except (ValueError, TypeError) as err:
+            raise TrainConfigError(f"train_dt = {cfg['train_dt']!r}: {err}") from err
     return cfg
+
+
+def learner_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The learner's env overrides: ``training_env_kwargs`` (``train_reward``) and ``train_dt`` as its ``dt``."""
+    kwargs = training_env_kwargs(cfg)
+    if cfg["train_dt"] is not None:
+        kwargs["dt"] = cfg["train_dt"]
+    return kwargs
 
 
 def _action_scale(value: Any, size: int) -> float | list[float]:
@@ -680,8 +705,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         torch.set_num_threads(cfg["threads"])
     seed = cfg["seed"]
     torch.manual_seed(seed)
-    # the learner's env: the scenario with train_reward's shaping (none by default); the evaluation uses env_kwargs
-    env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **training_env_kwargs(cfg))
+    # the learner's env: the scenario with train_reward's shaping and train_dt (none by default); the evaluation
+    # uses env_kwargs
+    env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **learner_env_kwargs(cfg))
     env.set_seed(seed)
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
     normalize = cfg["normalize_observations"]
