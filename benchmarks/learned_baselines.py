@@ -159,8 +159,8 @@ def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
     return config["scenario"], dict(config["env_kwargs"])
 
 
-def _shaping(folder: Path) -> dict[str, Any]:
-    """The run's ``train_reward`` (its reward shaping; ``{}`` for none, or a pipeline without it)."""
+def _run_config(folder: Path) -> dict[str, Any]:
+    """The run's ``config.yaml`` (``{}`` if it has none)."""
     import yaml
 
     from marine_formation_env import ENV_ID
@@ -169,8 +169,12 @@ def _shaping(folder: Path) -> dict[str, Any]:
     if not path.is_file():
         return {}
     config = yaml.safe_load(path.read_text()) or {}
-    config = config.get(ENV_ID, config)  # an SB3 run's config sits under the env id
-    return dict(config.get("train_reward") or {})
+    return dict(config.get(ENV_ID, config))  # an SB3 run's config sits under the env id
+
+
+def _shaping(folder: Path) -> dict[str, Any]:
+    """The run's ``train_reward`` (its reward shaping; ``{}`` for none, or a pipeline without it)."""
+    return dict(_run_config(folder).get("train_reward") or {})
 
 
 def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:
@@ -522,6 +526,9 @@ def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     shaping = _shaping(folder)
     if shaping:
         text += ", trained on a shaped reward (" + ", ".join(f"{k}={v}" for k, v in shaping.items()) + ")"
+    period = _run_config(folder).get("train_dt")
+    if period is not None:
+        text += f", deciding every {float(period):g} s in training"
     return f"{text} ({row.note})" if row.note else text
 
 

@@ -164,6 +164,17 @@ def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
 
 
+def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypatch):
+    monkeypatch.setattr(lb, "_scenario_of", lambda folder: ("paper", {"action_level": "force"}))
+    record = {"minutes": 60.0, "seed": 0}
+    (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {sigma_cross_track: 5.0}\ntrain_dt: 0.5\n")
+    text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
+    assert text.startswith("paper scenario, force level: TorchRL MAPPO, 60 min, training seed 0")
+    assert "shaped reward (sigma_cross_track=5.0)" in text and text.endswith("deciding every 0.5 s in training")
+    (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_dt: null\n")
+    assert "deciding" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
+
+
 def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_on_the_benchmark_s_reward(
     tmp_path, monkeypatch
 ):
