@@ -110,7 +110,8 @@ uses the scenario's. ``progress.csv`` logs the spread.
 
 ``train_dt`` lets the learner decide less often than the scenario's control
 period: its env holds each action for ``train_dt`` seconds (``dt`` of the
-training env only; RK4 substeps as the scenario's rule, at most 0.1 s), so an
+training env only; its RK4 substeps are ``env_kwargs``' ``substeps`` if set,
+else ``ceil(train_dt / 0.1 s)``), so an
 episode is ``horizon / train_dt`` decisions and ``gamma``, ``lmbda`` count per
 ``train_dt``. The policy is a memoryless feedback of the observation, so the
 evaluation, ``baselines.evaluate`` and the export run it at the scenario's own
