@@ -390,7 +390,8 @@ def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Pa
             grid = grid[grid >= max(t[0] for t, _ in curves)]
             ys = np.array([np.interp(grid, t, y) for t, y in curves])
             ax.fill_between(grid, ys.min(axis=0), ys.max(axis=0), alpha=0.25, color="C0", lw=0)
-            ax.plot(grid, ys.mean(axis=0), color="C0", label=f"learned, mean of {len(curves)} seeds (min–max)")
+            label = f"learned, mean of {len(curves)} seeds (min–max)" if len(curves) > 1 else "learned, one seed"
+            ax.plot(grid, ys.mean(axis=0), color="C0", label=label)
         if mine and not shaped:
             any_reference = True
             ax.axhline(np.mean([r["reference"]["return"] for r in mine]), color="k", ls="--", label="reference")
