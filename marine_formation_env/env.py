@@ -185,7 +185,11 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     terms take ``e_j``, ``β_j``, ``θ_j = ℓ_j − D_xj`` and ``ℓ̇_j`` in place of
     ``y_j − D_yj``, ``ψ_j``, ``x_j − D_xj`` and ``ẋ_j`` (a vessel crabbing
     through a turn pays a small heading cost). Weights and scales
-    are ``reward=RewardConfig(...)`` fields. If the
+    are ``reward=RewardConfig(...)`` fields; ``fine_share=f`` (0 here) charges
+    the share f of each of the four tracking terms at ``fine_scale`` (0.05) of
+    its σ instead, ``(1 − f)·c(e; σ) + f·c(e; 0.05·σ)``, for a learner that
+    needs a slope inside the success band (a training option: the benchmark's
+    reward is the one above). If the
     formation terminates early, every vessel also receives
     ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
     so ending an episode never pays. ``infos[agent]`` holds every term as

@@ -116,9 +116,14 @@ def bounded_cost(error: Any, sigma: float) -> Any:
     return z2 / (1.0 + z2)
 
 
-def cost_term(weight: float, error: Any, sigma: float, dt: float) -> Any:
-    """One tracking term of the step reward: ``−dt·w·c(e; σ)``."""
-    return -dt * weight * bounded_cost(error, sigma)
+def cost_term(weight: float, error: Any, sigma: float, dt: float, fine_share: float, fine_scale: float) -> Any:
+    """One tracking term of the step reward: ``−dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)]``.
+
+    ``f`` is ``fine_share`` and ``s`` is ``fine_scale`` (:class:`RewardConfig`). With ``f = 0``
+    (the benchmark's reward) this is exactly ``−dt·w·c(e; σ)``: ``1·c + 0·c' = c`` in floating point.
+    """
+    mixed = (1.0 - fine_share) * bounded_cost(error, sigma) + fine_share * bounded_cost(error, fine_scale * sigma)
+    return -dt * weight * mixed
 
 
 def effort_term(weight: float, mean_square_action: Any, dt: float) -> Any:

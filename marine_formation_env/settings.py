@@ -134,6 +134,14 @@ class RewardConfig:
     ``−dt·Σ_k w_k·c_k``. A formation that terminates early (collision or leaving
     the workspace) receives ``−(Σ_k w_k)·(time left)``, the worst reward the rest
     of the episode could have given, so ending an episode never pays.
+
+    ``fine_share`` f ∈ [0, 1] charges that share of each tracking term
+    (cross-track, heading, coordination, speed) at the finer scale
+    ``fine_scale·σ_k`` instead: ``c_k = (1 − f)·c(e; σ_k) + f·c(e; fine_scale·σ_k)``,
+    still in [0, 1), so the terminal penalty is unchanged. It is off (0) in the
+    benchmark's reward; a learner may train with it (``train_reward``) to see a
+    slope near the goal that the broad scales leave almost flat. The default
+    ``fine_scale`` 0.05 puts the fine scales at 1 m, 0.01 rad, 1 m and 0.05 m/s.
     """
 
     cross_track: float = 1.0
@@ -145,6 +153,8 @@ class RewardConfig:
     sigma_heading: float = 0.2
     sigma_coordination: float = 20.0
     sigma_speed: float = 1.0
+    fine_share: float = 0.0
+    fine_scale: float = 0.05
     terminal_penalty: bool = True
 
     def __post_init__(self) -> None:
@@ -153,9 +163,11 @@ class RewardConfig:
             if f.name == "terminal_penalty":
                 continue
             value = getattr(self, f.name)
-            check_number("reward", f.name, value)
+            check_number("reward", f.name, value, strict=f.name == "fine_scale")
             if f.name.startswith("sigma_") and value == 0:
                 raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
+        if self.fine_share > 1.0:
+            raise ConfigError(f"reward.fine_share must be a share in [0, 1], got {self.fine_share!r}")
 
     @property
     def total_weight(self) -> float:

@@ -44,7 +44,7 @@ CASES = {
     "ring4-noise": {"n_vessels": 4, "topology": "ring"},
     "varying-ud-effort": {
         "u_d": SpeedProfile(mean=5.0, amplitude=0.6, period=40.0),
-        "reward": RewardConfig(effort=0.4),
+        "reward": RewardConfig(effort=0.4, fine_share=0.3, fine_scale=0.1),
     },
     "as-printed": {"paper_as_printed": True},
     "random6-episode-ends": {"n_vessels": 6, "topology": "random", "safety_distance": 25.0, "horizon": 20.0},

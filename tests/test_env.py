@@ -333,6 +333,50 @@ def test_reward_components_sum_to_reward(level):
             assert -DT_DEFAULT[level] * 0.3 <= comp["effort"] < 0.0
 
 
+def _cost(error: float, sigma: float) -> float:
+    """c(e; σ) = (e/σ)²/(1 + (e/σ)²), the RewardConfig docstring's bounded cost, by hand."""
+    return (error / sigma) ** 2 / (1.0 + (error / sigma) ** 2)
+
+
+@pytest.mark.parametrize(
+    ("reward", "share", "fine"),
+    [(None, 0.0, 0.05), ({"fine_share": 0.4}, 0.4, 0.05), ({"fine_share": 1.0, "fine_scale": 0.2}, 1.0, 0.2)],
+)
+def test_reward_terms_match_the_docstring_formula_from_the_state(reward, share, fine):
+    # the reward after one step, from the state after it: each tracking term is
+    # −dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)], with the defaults w = (1, 0.25, 1, 0.5), σ = (20 m, 0.2 rad,
+    # 20 m, 1 m/s); f = 0 is the benchmark's reward
+    overrides = {} if reward is None else {"reward": reward}
+    env = marine_formation_env.parallel_env("paper", action_level="speed", **overrides)
+    env.reset(options={"initial_state": PAPER_X0})
+    _, rewards, _, _, infos = env.step({a: np.array([0.3], np.float32) for a in env.agents})
+    s = env.vessel_states
+    theta = s[:, 0] - PAPER_D[:, 0]
+    dt = DT_DEFAULT["speed"]
+    for j in range(3):
+        errors = {
+            "cross_track": (s[j, 1] - PAPER_D[j, 1], 1.0, 20.0),
+            "heading": (wrap(s[j, 2]), 0.25, 0.2),
+            "coordination": (theta[j] - theta.mean(), 1.0, 20.0),
+            "speed": (x_dot(s[j]) - 5.0, 0.5, 1.0),
+        }
+        comp = reward_terms(infos[f"vessel_{j}"])
+        for name, (e, w, sigma) in errors.items():
+            expected = -dt * w * ((1.0 - share) * _cost(e, sigma) + share * _cost(e, fine * sigma))
+            assert comp[name] == pytest.approx(expected, rel=1e-9, abs=1e-15), name
+        assert rewards[f"vessel_{j}"] == pytest.approx(sum(comp.values()), rel=1e-12)
+
+
+def test_the_fine_share_moves_the_slope_to_the_goal_and_keeps_the_terminal_penalty():
+    # a 2 m coordination error costs 1 % of the term at σ = 20 m; with half of it charged at 1 m it costs
+    # 0.5·0.0099 + 0.5·0.8 ≈ 40 %, while the worst rate (the terminal penalty) stays Σ w = 2.75
+    broad = RewardConfig()
+    fine = RewardConfig(fine_share=0.5)
+    assert _cost(2.0, broad.sigma_coordination) == pytest.approx(0.0099, abs=1e-4)
+    assert 0.5 * _cost(2.0, 20.0) + 0.5 * _cost(2.0, 1.0) == pytest.approx(0.405, abs=1e-3)
+    assert fine.total_weight == broad.total_weight == DEFAULT_TOTAL_WEIGHT
+
+
 # --------------------------------------------------------------------------- observation content
 
 

@@ -70,6 +70,23 @@ def test_terminal_penalty_must_be_a_boolean(value):
     assert make_config("paper", reward={"terminal_penalty": False}).reward.terminal_penalty is False
 
 
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("fine_share", 1.5, "a share in [0, 1]"),
+        ("fine_share", -0.1, "≥ 0"),
+        ("fine_share", float("nan"), "finite number"),
+        ("fine_scale", 0.0, "> 0"),
+        ("fine_scale", -1.0, "> 0"),
+        ("fine_scale", "1", "finite number"),
+    ],
+)
+def test_the_fine_reward_share_and_scale_are_checked(field, value, message):
+    pattern = rf"reward\.{field} must be .*{re.escape(message)}.*got {re.escape(repr(value))}"
+    with pytest.raises(ConfigError, match=pattern):
+        make_config("paper", reward={field: value})
+
+
 @pytest.mark.parametrize("value", ["x", 1.5, -1, True, None])
 def test_topology_seed_must_be_a_whole_number(value):
     with pytest.raises(ConfigError, match=rf"topology_seed must be a whole number ≥ 0, got {re.escape(repr(value))}"):
