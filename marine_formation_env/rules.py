@@ -120,10 +120,12 @@ def cost_term(weight: float, error: Any, sigma: float, dt: float, fine_share: fl
     """One tracking term of the step reward: ``−dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)]``.
 
     ``f`` is ``fine_share`` and ``s`` is ``fine_scale`` (:class:`RewardConfig`). With ``f = 0``
-    (the benchmark's reward) this is exactly ``−dt·w·c(e; σ)``: ``1·c + 0·c' = c`` in floating point.
+    (the benchmark's reward) it is ``−dt·w·c(e; σ)``, and the fine cost is not computed.
     """
-    mixed = (1.0 - fine_share) * bounded_cost(error, sigma) + fine_share * bounded_cost(error, fine_scale * sigma)
-    return -dt * weight * mixed
+    cost = bounded_cost(error, sigma)
+    if fine_share != 0.0:
+        cost = (1.0 - fine_share) * cost + fine_share * bounded_cost(error, fine_scale * sigma)
+    return -dt * weight * cost
 
 
 def effort_term(weight: float, mean_square_action: Any, dt: float) -> Any:
