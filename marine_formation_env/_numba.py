@@ -238,7 +238,7 @@ def _kernel(  # type: ignore[no-untyped-def]
     obs_low,  # (D,) float32
     obs_high,  # (D,) float32
     weights,  # (5,) cross_track, heading, coordination, speed, effort
-    scales,  # (6,) the four σ, then fine_share and fine_scale
+    scales,  # (9,) the four σ, the four fine shares (RewardConfig.fine_shares), then fine_scale
     actions,  # (B, N, A) clipped normalized actions (for the effort term)
     terminal_penalty,  # worst remaining reward rate (Σ weights), 0 if off
     workspace,  # (4,)
@@ -401,7 +401,7 @@ def _kernel(  # type: ignore[no-untyped-def]
                 obs[b, j, base + AGE] = 0.0
             errors = (e_j, psi_w, theta_j - theta_mean, xdot_j - u_d[b])
             for c in range(4):
-                comps[c, b, j] = cost_term(weights[c], errors[c], scales[c], dt, scales[4], scales[5])
+                comps[c, b, j] = cost_term(weights[c], errors[c], scales[c], dt, scales[4 + c], scales[8])
             sq = 0.0
             for f in range(actions.shape[2]):
                 sq += actions[b, j, f] * actions[b, j, f]
@@ -864,7 +864,14 @@ class StepKernel:
             obs_high,
             np.array([w.cross_track, w.heading, w.coordination, w.speed, w.effort]),
             np.array(
-                [w.sigma_cross_track, w.sigma_heading, w.sigma_coordination, w.sigma_speed, w.fine_share, w.fine_scale]
+                [
+                    w.sigma_cross_track,
+                    w.sigma_heading,
+                    w.sigma_coordination,
+                    w.sigma_speed,
+                    *w.fine_shares,
+                    w.fine_scale,
+                ]
             ),
         )
         self.tail = (

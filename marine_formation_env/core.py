@@ -663,14 +663,19 @@ class FormationCore:
             e, heading = s[..., Y] - self._dy, s[..., PSI]
         u_d = cfg.u_d.value(self.time)[:, None]
         dt = cfg.dt
-        fine = (w.fine_share, w.fine_scale)
+        share = w.fine_shares
         components = {
-            "cross_track": cost_term(w.cross_track, e, w.sigma_cross_track, dt, *fine),
-            "heading": cost_term(w.heading, wrap_angle(heading), w.sigma_heading, dt, *fine),
+            "cross_track": cost_term(w.cross_track, e, w.sigma_cross_track, dt, share[0], w.fine_scale),
+            "heading": cost_term(w.heading, wrap_angle(heading), w.sigma_heading, dt, share[1], w.fine_scale),
             "coordination": cost_term(
-                w.coordination, theta - theta.mean(axis=1, keepdims=True), w.sigma_coordination, dt, *fine
+                w.coordination,
+                theta - theta.mean(axis=1, keepdims=True),
+                w.sigma_coordination,
+                dt,
+                share[2],
+                w.fine_scale,
             ),
-            "speed": cost_term(w.speed, x_dot - u_d, w.sigma_speed, dt, *fine),
+            "speed": cost_term(w.speed, x_dot - u_d, w.sigma_speed, dt, share[3], w.fine_scale),
             "effort": effort_term(w.effort, np.mean(np.square(actions), axis=-1), dt),
         }
         out_of_bounds = np.any(

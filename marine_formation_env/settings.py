@@ -125,6 +125,10 @@ class InitNoise:
         return not np.any(self.as_array())
 
 
+#: The tracking terms of the reward, in the order the backends compute them.
+TRACKING_TERMS = ("cross_track", "heading", "coordination", "speed")
+
+
 @dataclass(frozen=True)
 class RewardConfig:
     """Weights and scales of the per-agent reward (see the env docstring).
@@ -135,13 +139,15 @@ class RewardConfig:
     the workspace) receives ``−(Σ_k w_k)·(time left)``, the worst reward the rest
     of the episode could have given, so ending an episode never pays.
 
-    ``fine_share`` f ∈ [0, 1] charges that share of each tracking term
-    (cross-track, heading, coordination, speed) at the finer scale
-    ``fine_scale·σ_k`` instead: ``c_k = (1 − f)·c(e; σ_k) + f·c(e; fine_scale·σ_k)``,
-    still in [0, 1), so the terminal penalty is unchanged. It is off (0) in the
-    benchmark's reward; a learner may train with it (``train_reward``) to see a
-    slope near the goal that the broad scales leave almost flat. The default
-    ``fine_scale`` 0.05 puts the fine scales at 1 m, 0.01 rad, 1 m and 0.05 m/s.
+    ``fine_share`` f ∈ [0, 1] charges that share of each tracking term named
+    in ``fine_terms`` (by default all four: cross-track, heading, coordination,
+    speed) at the finer scale ``fine_scale·σ_k`` instead:
+    ``c_k = (1 − f)·c(e; σ_k) + f·c(e; fine_scale·σ_k)``, still in [0, 1), so
+    the terminal penalty is unchanged; the terms not named keep ``c(e; σ_k)``.
+    It is off (0) in the benchmark's reward; a learner may train with it
+    (``train_reward``) to see a slope near the goal that the broad scales leave
+    almost flat. The default ``fine_scale`` 0.05 puts the fine scales at 1 m,
+    0.01 rad, 1 m and 0.05 m/s.
     """
 
     cross_track: float = 1.0
@@ -155,12 +161,24 @@ class RewardConfig:
     sigma_speed: float = 1.0
     fine_share: float = 0.0
     fine_scale: float = 0.05
+    fine_terms: tuple[str, ...] = TRACKING_TERMS
     terminal_penalty: bool = True
 
     def __post_init__(self) -> None:
         check_bool("reward", "terminal_penalty", self.terminal_penalty)
+        terms = self.fine_terms
+        if isinstance(terms, str) or not isinstance(terms, (list, tuple)):
+            raise ConfigError(f"reward.fine_terms must be a list of term names {list(TRACKING_TERMS)}, got {terms!r}")
+        for term in terms:
+            if term not in TRACKING_TERMS:
+                raise ConfigError(
+                    f"reward.fine_terms: unknown term {term!r}; the tracking terms are {list(TRACKING_TERMS)}"
+                )
+        if len(set(terms)) != len(terms):
+            raise ConfigError(f"reward.fine_terms names a term twice: {list(terms)!r}")
+        object.__setattr__(self, "fine_terms", tuple(terms))  # a YAML or JSON list, kept hashable
         for f in dataclasses.fields(self):
-            if f.name == "terminal_penalty":
+            if f.name in ("terminal_penalty", "fine_terms"):
                 continue
             value = getattr(self, f.name)
             check_number("reward", f.name, value, strict=f.name == "fine_scale")
@@ -168,6 +186,12 @@ class RewardConfig:
                 raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
         if self.fine_share > 1.0:
             raise ConfigError(f"reward.fine_share must be a share in [0, 1], got {self.fine_share!r}")
+
+    @property
+    def fine_shares(self) -> tuple[float, float, float, float]:
+        """Each tracking term's fine share, in :data:`TRACKING_TERMS` order (0 for a term not in ``fine_terms``)."""
+        f = self.fine_share
+        return tuple(f if term in self.fine_terms else 0.0 for term in TRACKING_TERMS)  # type: ignore[return-value]
 
     @property
     def total_weight(self) -> float:

@@ -44,7 +44,9 @@ CASES = {
     "ring4-noise": {"n_vessels": 4, "topology": "ring"},
     "varying-ud-effort": {
         "u_d": SpeedProfile(mean=5.0, amplitude=0.6, period=40.0),
-        "reward": RewardConfig(effort=0.4, fine_share=0.3, fine_scale=0.1),
+        "reward": RewardConfig(
+            effort=0.4, fine_share=0.3, fine_scale=0.1, fine_terms=("cross_track", "coordination", "speed")
+        ),
     },
     "as-printed": {"paper_as_printed": True},
     "random6-episode-ends": {"n_vessels": 6, "topology": "random", "safety_distance": 25.0, "horizon": 20.0},

@@ -345,14 +345,27 @@ def _cost(error: float, sigma: float) -> float:
     return (error / sigma) ** 2 / (1.0 + (error / sigma) ** 2)
 
 
+ALL_TERMS = ("cross_track", "heading", "coordination", "speed")
+
+
 @pytest.mark.parametrize(
-    ("reward", "share", "fine"),
-    [(None, 0.0, 0.05), ({"fine_share": 0.4}, 0.4, 0.05), ({"fine_share": 1.0, "fine_scale": 0.2}, 1.0, 0.2)],
+    ("reward", "share", "fine", "fine_terms"),
+    [
+        (None, 0.0, 0.05, ALL_TERMS),
+        ({"fine_share": 0.4}, 0.4, 0.05, ALL_TERMS),
+        ({"fine_share": 1.0, "fine_scale": 0.2}, 1.0, 0.2, ALL_TERMS),
+        (
+            {"fine_share": 0.5, "fine_scale": 0.1, "fine_terms": ["cross_track", "coordination"]},
+            0.5,
+            0.1,
+            ALL_TERMS[::2],
+        ),
+    ],
 )
-def test_reward_terms_match_the_docstring_formula_from_the_state(reward, share, fine):
-    # the reward after one step, from the state after it: each tracking term is
-    # −dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)], with the defaults w = (1, 0.25, 1, 0.5), σ = (20 m, 0.2 rad,
-    # 20 m, 1 m/s); f = 0 is the benchmark's reward
+def test_reward_terms_match_the_docstring_formula_from_the_state(reward, share, fine, fine_terms):
+    # the reward after one step, from the state after it: each tracking term in fine_terms is
+    # −dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)], the others −dt·w·c(e; σ), with the defaults
+    # w = (1, 0.25, 1, 0.5), σ = (20 m, 0.2 rad, 20 m, 1 m/s); f = 0 is the benchmark's reward
     overrides = {} if reward is None else {"reward": reward}
     env = marine_formation_env.parallel_env("paper", action_level="speed", **overrides)
     env.reset(options={"initial_state": PAPER_X0})
@@ -369,7 +382,8 @@ def test_reward_terms_match_the_docstring_formula_from_the_state(reward, share, 
         }
         comp = reward_terms(infos[f"vessel_{j}"])
         for name, (e, w, sigma) in errors.items():
-            expected = -dt * w * ((1.0 - share) * _cost(e, sigma) + share * _cost(e, fine * sigma))
+            f = share if name in fine_terms else 0.0
+            expected = -dt * w * ((1.0 - f) * _cost(e, sigma) + f * _cost(e, fine * sigma))
             assert comp[name] == pytest.approx(expected, rel=1e-9, abs=1e-15), name
         assert rewards[f"vessel_{j}"] == pytest.approx(sum(comp.values()), rel=1e-12)
 

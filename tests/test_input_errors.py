@@ -87,6 +87,20 @@ def test_the_fine_reward_share_and_scale_are_checked(field, value, message):
         make_config("paper", reward={field: value})
 
 
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("speed", "must be a list of term names"),
+        (3, "must be a list of term names"),
+        (["drift"], "unknown term 'drift'"),
+        (["speed", "speed"], "names a term twice"),
+    ],
+)
+def test_the_fine_reward_terms_are_checked(value, message):
+    with pytest.raises(ConfigError, match=rf"reward\.fine_terms.*{re.escape(message)}"):
+        make_config("paper", reward={"fine_share": 0.3, "fine_terms": value})
+
+
 @pytest.mark.parametrize("value", ["x", 1.5, -1, True, None])
 def test_topology_seed_must_be_a_whole_number(value):
     with pytest.raises(ConfigError, match=rf"topology_seed must be a whole number ≥ 0, got {re.escape(repr(value))}"):
