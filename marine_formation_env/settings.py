@@ -35,6 +35,7 @@ __all__ = [
     "GENERATED_INIT_NOISE",
     "PAPER_INITIAL_STATE",
     "SCENARIOS",
+    "TRACKING_TERMS",
     "InitNoise",
     "RewardConfig",
     "Settings",
@@ -188,10 +189,10 @@ class RewardConfig:
             raise ConfigError(f"reward.fine_share must be a share in [0, 1], got {self.fine_share!r}")
 
     @property
-    def fine_shares(self) -> tuple[float, float, float, float]:
+    def fine_shares(self) -> tuple[float, ...]:
         """Each tracking term's fine share, in :data:`TRACKING_TERMS` order (0 for a term not in ``fine_terms``)."""
         f = self.fine_share
-        return tuple(f if term in self.fine_terms else 0.0 for term in TRACKING_TERMS)  # type: ignore[return-value]
+        return tuple(f if term in self.fine_terms else 0.0 for term in TRACKING_TERMS)
 
     @property
     def total_weight(self) -> float:
