@@ -862,17 +862,8 @@ class StepKernel:
         self.limits = (
             obs_low,
             obs_high,
-            np.array([w.cross_track, w.heading, w.coordination, w.speed, w.effort]),
-            np.array(
-                [
-                    w.sigma_cross_track,
-                    w.sigma_heading,
-                    w.sigma_coordination,
-                    w.sigma_speed,
-                    *w.fine_shares,
-                    w.fine_scale,
-                ]
-            ),
+            np.array([*w.tracking_weights, w.effort]),
+            np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
         )
         self.tail = (
             w.total_weight if w.terminal_penalty else 0.0,

@@ -106,6 +106,7 @@ from marine_formation_env.rules import (
     terminal_term,
 )
 from marine_formation_env.scenarios import ScenarioConfig, min_separation
+from marine_formation_env.settings import TRACKING_TERMS
 from marine_formation_env.streams import channel_streams
 
 __all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
@@ -663,21 +664,15 @@ class FormationCore:
             e, heading = s[..., Y] - self._dy, s[..., PSI]
         u_d = cfg.u_d.value(self.time)[:, None]
         dt = cfg.dt
-        share = w.fine_shares
+        # the tracking errors, in TRACKING_TERMS order
+        errors = (e, wrap_angle(heading), theta - theta.mean(axis=1, keepdims=True), x_dot - u_d)
         components = {
-            "cross_track": cost_term(w.cross_track, e, w.sigma_cross_track, dt, share[0], w.fine_scale),
-            "heading": cost_term(w.heading, wrap_angle(heading), w.sigma_heading, dt, share[1], w.fine_scale),
-            "coordination": cost_term(
-                w.coordination,
-                theta - theta.mean(axis=1, keepdims=True),
-                w.sigma_coordination,
-                dt,
-                share[2],
-                w.fine_scale,
-            ),
-            "speed": cost_term(w.speed, x_dot - u_d, w.sigma_speed, dt, share[3], w.fine_scale),
-            "effort": effort_term(w.effort, np.mean(np.square(actions), axis=-1), dt),
+            term: cost_term(weight, error, sigma, dt, share, w.fine_scale)
+            for term, weight, error, sigma, share in zip(
+                TRACKING_TERMS, w.tracking_weights, errors, w.tracking_sigmas, w.fine_shares, strict=True
+            )
         }
+        components["effort"] = effort_term(w.effort, np.mean(np.square(actions), axis=-1), dt)
         out_of_bounds = np.any(
             outside_workspace(s[..., X], s[..., Y], *cfg.workspace)
             | outside_envelope(s[..., U], s[..., V], s[..., R], cfg.max_speed, cfg.max_yaw_rate),

@@ -189,6 +189,16 @@ class RewardConfig:
             raise ConfigError(f"reward.fine_share must be a share in [0, 1], got {self.fine_share!r}")
 
     @property
+    def tracking_weights(self) -> tuple[float, ...]:
+        """The tracking terms' weights w_k, in :data:`TRACKING_TERMS` order."""
+        return tuple(getattr(self, term) for term in TRACKING_TERMS)
+
+    @property
+    def tracking_sigmas(self) -> tuple[float, ...]:
+        """The tracking terms' scales σ_k, in :data:`TRACKING_TERMS` order."""
+        return tuple(getattr(self, f"sigma_{term}") for term in TRACKING_TERMS)
+
+    @property
     def fine_shares(self) -> tuple[float, ...]:
         """Each tracking term's fine share, in :data:`TRACKING_TERMS` order (0 for a term not in ``fine_terms``)."""
         f = self.fine_share
