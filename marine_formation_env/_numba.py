@@ -817,7 +817,8 @@ class StepKernel:
     Everything the kernel needs that does not change between steps (the
     vessel, the gains, the level, the limits, the reward weights, the
     observation bounds and slot geometry, the channel's constants) is packed
-    at construction; :meth:`run` passes the per-step arrays.
+    at construction (the reward again by :meth:`set_reward`); :meth:`run`
+    passes the per-step arrays.
 
     With non-ideal links (``channel`` given) the same kernel also runs the
     channel's control instant for each formation right after its step, on the
@@ -843,8 +844,6 @@ class StepKernel:
         measured: np.ndarray | None = None,
     ) -> None:
         coeffs, gains = coefficients(config)
-        w = config.reward
-        self.config = config
         self.kernel = step_kernel(num_envs)
         self.dims = (num_envs, config.n_vessels, obs_low.shape[0])
         self.model = (
@@ -859,19 +858,9 @@ class StepKernel:
             np.array(config.current.coefficients),
         )
         self.geometry = (np.ascontiguousarray(config.formation), slot_index, slot_mask)
-        self.limits = (
-            obs_low,
-            obs_high,
-            np.array([*w.tracking_weights, w.effort]),
-            np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
-        )
-        self.tail = (
-            w.total_weight if w.terminal_penalty else 0.0,
-            np.array(config.workspace),
-            config.safety_distance,
-            config.max_speed,
-            config.max_yaw_rate,
-        )
+        self._bounds = (obs_low, obs_high)
+        self._ends = (np.array(config.workspace), config.safety_distance, config.max_speed, config.max_yaw_rate)
+        self.set_reward(config)
         self.channel, self.sensor_noise = channel, sensor_noise
         if channel is None:  # placeholders of the same types: one compiled kernel serves both cases
             ideal = [(math.inf, np.eye(config.n_vessels))]
@@ -891,6 +880,20 @@ class StepKernel:
             rules.LOOKAHEAD,
             np.zeros((num_envs, config.n_vessels, 4)),
         )
+
+    def set_reward(self, config: Any) -> None:
+        """Run the following steps with ``config``: this kernel's scenario, its reward possibly another.
+
+        Packs the reward's weights, scales and terminal rate; nothing else of ``config`` is read again.
+        """
+        self.config = config
+        w = config.reward
+        self.limits = (
+            *self._bounds,
+            np.array([*w.tracking_weights, w.effort]),
+            np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
+        )
+        self.tail = (w.total_weight if w.terminal_penalty else 0.0, *self._ends)
 
     def run(
         self,

@@ -8,6 +8,7 @@ promises; one-line CLI errors naming the bad value.
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -29,7 +30,10 @@ from marine_formation_env.scenarios import make_config  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
-HEADER = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread,smoothness"
+HEADER = (
+    "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread,smoothness,"
+    "reward_switched"
+)
 TINY = [
     "num_envs=4",
     "frames_per_batch=40",
@@ -175,6 +179,23 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
             "initial_state_curriculum.until must lie in (0, 1], got 0",
         ),
         ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
+        ("train_reward_switch={'after': 0.5}", "train_reward_switch must be null or a mapping with the keys after"),
+        (
+            "train_reward_switch={'after': 0, 'reward': {'fine_share': 0.3}}",
+            "train_reward_switch.after must lie in (0, 1), got 0",
+        ),
+        (
+            "train_reward_switch={'after': 1.0, 'reward': {'fine_share': 0.3}}",
+            "train_reward_switch.after must lie in (0, 1), got 1.0",
+        ),
+        (
+            "train_reward_switch={'after': 0.5, 'reward': {}}",
+            "train_reward_switch.reward must be a non-empty mapping of reward fields, got {}",
+        ),
+        (
+            "train_reward_switch={'after': 0.5, 'reward': {'fine_share': 2}}",
+            "reward.fine_share must be a share in [0, 1], got 2",
+        ),
         ("train_dt=0", "train_dt must be > 0, got 0"),
         ("train_dt=1000", "train_dt = 1000.0: horizon = 400.0 s must be at least one control period dt = 1000.0 s"),
     ],
@@ -203,6 +224,31 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
     _, config = load_torch_policy(out)
     assert "reward" not in config["env_kwargs"] and config["train_reward"]["coordination"] == 0.0
     assert trainer.training_env_kwargs(config)["reward"]["speed"] == 0.0
+
+
+def test_train_reward_switch_changes_the_learner_s_reward_once_at_its_fraction_of_the_budget(tmp_path, monkeypatch):
+    # the learner's reward is exactly 0 at first (every weight 0, no terminal penalty); from half the budget on
+    # the coordination term is back, and with 10 m of initial noise along the path it costs something
+    from marine_formation_env.torchrl import MarineFormationTorchEnv
+
+    rewards = record_calls(monkeypatch, MarineFormationTorchEnv, "set_reward")
+    out = tmp_path / "switched"
+    args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    zero = [f"train_reward.{k}=0.0" for k in ("cross_track", "heading", "coordination", "speed")]
+    for item in [*TINY, *zero, "train_reward.terminal_penalty=false"]:
+        args += ["--set", item]
+    assert main([*args, "--set", "train_reward_switch={'after': 0.5, 'reward': {'coordination': 1.0}}"]) == 0
+    # 80 frames in two iterations of 40: the switch comes after the first, once
+    assert len(rewards) == 1
+    assert rewards[0].coordination == 1.0 and rewards[0].cross_track == 0.0 and not rewards[0].terminal_penalty
+    with (out / "progress.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [int(row["reward_switched"]) for row in rows] == [0, 1]
+    assert float(rows[0]["mean_reward"]) == 0.0 and float(rows[1]["mean_reward"]) < 0.0
+    _, config = load_torch_policy(out)
+    assert "reward" not in config["env_kwargs"]  # the evaluation's reward stays the benchmark's
+    cfg = resolve({"train_reward_switch": {"after": 0.25, "reward": {"fine_share": 0.3}}}, seed=0)
+    assert trainer.switched_reward(cfg).fine_share == 0.3
 
 
 def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):

@@ -42,6 +42,7 @@ nest; unknown keys and bad values are refused by name):
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
+| ``train_reward_switch`` | ``{after: f, reward: {…}}``: more reward fields from f of the budget on (below) | null |
 | ``train_dt`` | the learner's control period [s] (below), or null: the scenario's ``dt`` | null |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
@@ -97,6 +98,17 @@ while ``env_kwargs``, the closing evaluation, ``baselines.evaluate`` and the
 learned baselines keep the benchmark's reward. ``progress.csv``'s
 ``mean_reward`` and ``episode_return`` are then in the shaped reward, not
 comparable with the reference's return.
+
+``train_reward_switch: {after: f, reward: {…}}`` changes the learner's reward
+once during the run: after the iteration that spends the fraction ``f`` ∈ (0, 1)
+of the budget (below), the training env's reward is ``train_reward``'s with
+``reward``'s fields on top (``MarineFormationTorchEnv.set_reward``; formations
+running keep their episode). For example ``{after: 0.4, reward: {fine_share:
+0.3}}`` trains on the benchmark's broad scales until the formations hold
+together, then adds a slope near the goal. The evaluation keeps the benchmark's
+reward, as always; ``progress.csv``'s ``reward_switched`` is 1 for the batches
+collected with the switched reward, whose returns are in its units. ``normalize_reward``'s running
+deviation carries over the switch.
 
 ``initial_state_curriculum`` is a curriculum over the initial state, in the
 learner's env only: before each iteration the training env draws its
@@ -236,6 +248,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_reward": False,
     "train_reward": {},
     "initial_state_curriculum": None,
+    "train_reward_switch": None,
     "train_dt": None,
     "eval_episodes": 4,
     "threads": 1,
@@ -315,6 +328,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         )
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
+    cfg["train_reward_switch"] = _check_reward_switch(cfg)
     if cfg["train_dt"] is not None:
         cfg["train_dt"] = _positive("train_dt", cfg["train_dt"])
         try:
@@ -330,6 +344,36 @@ def learner_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
     if cfg["train_dt"] is not None:
         kwargs["dt"] = cfg["train_dt"]
     return kwargs
+
+
+def _check_reward_switch(cfg: dict[str, Any]) -> dict[str, Any] | None:
+    """``train_reward_switch`` checked: null, or ``{after: (0, 1), reward: {reward fields}}`` (both keys)."""
+    key, value = "train_reward_switch", cfg["train_reward_switch"]
+    if value is None:
+        return None
+    if not isinstance(value, dict) or set(value) != {"after", "reward"}:
+        raise TrainConfigError(f"{key} must be null or a mapping with the keys after and reward, got {value!r}")
+    after = _fraction(f"{key}.after", value["after"])
+    if not 0.0 < after < 1.0:  # 0 is train_reward itself, 1 would never switch
+        raise TrainConfigError(f"{key}.after must lie in (0, 1), got {value['after']!r}")
+    if not isinstance(value["reward"], dict) or not value["reward"]:
+        raise TrainConfigError(f"{key}.reward must be a non-empty mapping of reward fields, got {value['reward']!r}")
+    checked = {"after": after, "reward": dict(value["reward"])}
+    try:
+        switched_reward({**cfg, key: checked})
+    except (ValueError, TypeError) as err:
+        raise TrainConfigError(f"{key}.reward {value['reward']}: {err}") from err
+    return checked
+
+
+def switched_reward(cfg: dict[str, Any]) -> Any:
+    """The learner's ``RewardConfig`` after ``train_reward_switch``: the scenario's reward with ``train_reward``'s
+    fields and then the switch's own on top."""
+    from marine_formation_env.scenarios import make_config
+
+    kwargs = learner_env_kwargs(cfg)
+    reward = {**kwargs.get("reward", {}), **cfg["train_reward_switch"]["reward"]}
+    return make_config(cfg["scenario"], **{**kwargs, "reward": reward}).reward
 
 
 def _action_scale(value: Any, size: int) -> float | list[float]:
@@ -719,6 +763,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"])
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
+    switch = cfg["train_reward_switch"]
+    late_reward = None if switch is None else switched_reward(cfg)
+    switched = False
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
@@ -783,6 +830,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         # the collector steps this env object: restarts from the next batch on draw at the new scale
         scale = initial_spread(cfg, elapsed, frames)
         env.set_initial_spread(scale)
+        collected_with = int(switched)  # this batch's reward: 1 once switched
+        if late_reward is not None and not switched and budget_used(cfg, elapsed, frames) >= switch["after"]:
+            env.set_reward(late_reward)  # the next batch's steps are charged with it
+            switched = True
         rows.append(
             {
                 "frames": frames,
@@ -796,6 +847,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "updates": updates,
                 "initial_spread": scale,
                 "smoothness": smoothness,
+                "reward_switched": collected_with,
             }
         )
         bar.update(data.numel())
@@ -949,6 +1001,7 @@ def _save(
         "updates",
         "initial_spread",
         "smoothness",
+        "reward_switched",
     ]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()
