@@ -615,12 +615,18 @@ def _provenance(commit: str, records: list[dict[str, Any]], command: str) -> str
     """A published row's line: the commit its runs trained on (and the publishing one, when it differs), the machine.
 
     A run found done (its ``result.json``) may have trained on an older commit than the publish's; its record
-    keeps that commit (``unknown`` when written before records kept it).
+    keeps that commit (``unknown`` when written before records kept it). Runs that trained on different commits
+    are listed each with its row and seed.
     """
-    trained = sorted({str(r.get("commit", "unknown")) for r in records if "learned" in r})
-    if trained in ([], [commit]):
-        return f"measured on commit {commit}, {_machine()}, with `{command}`"
-    return f"trained on commit {', '.join(trained)} and published from commit {commit}, {_machine()}, with `{command}`"
+    runs = [r for r in records if "learned" in r]  # in the order they ran: row by row, seed by seed
+    trained = {str(r.get("commit", "unknown")) for r in runs}
+    tail = f"{_machine()}, with `{command}`"
+    if trained <= {commit}:
+        return f"measured on commit {commit}, {tail}"
+    if len(trained) == 1:
+        return f"trained on commit {trained.pop()} and published from commit {commit}, {tail}"
+    each = ", ".join(f"{r.get('row', '?')} seed {r.get('seed', '?')} on {r.get('commit', 'unknown')}" for r in runs)
+    return f"trained on several commits ({each}) and published from commit {commit}, {tail}"
 
 
 def _header_evaluation(row: Row, record: dict[str, Any], folder: Path, episodes: int) -> dict[str, Any]:

@@ -152,8 +152,14 @@ def test_a_published_row_names_the_commit_its_runs_trained_on_not_only_the_publi
     runs = [{"learned": {}, "commit": "feec4e0"}, {"learned": {}, "commit": "feec4e0"}, {"failed": "exit 1"}]
     older = lb._provenance("abc1234", runs, "cmd")
     assert older.startswith("trained on commit feec4e0 and published from commit abc1234, ")
-    mixed = lb._provenance("abc1234", [{"learned": {}, "commit": "b"}, {"learned": {}}], "cmd")
-    assert mixed.startswith("trained on commit b, unknown and published from commit abc1234")
+    mixed = [
+        {"row": "paper_force", "seed": 0, "learned": {}, "commit": "b"},
+        {"row": "paper_force", "seed": 1, "learned": {}},
+    ]
+    assert lb._provenance("abc1234", mixed, "cmd").startswith(
+        "trained on several commits (paper_force seed 0 on b, paper_force seed 1 on unknown) and published from commit"
+        " abc1234, "
+    )
 
 
 def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
