@@ -173,8 +173,10 @@ def _run_config(folder: Path) -> dict[str, Any]:
 
 
 def _shaping(folder: Path) -> dict[str, Any]:
-    """The run's ``train_reward`` (its reward shaping; ``{}`` for none, or a pipeline without it)."""
-    return dict(_run_config(folder).get("train_reward") or {})
+    """The reward fields the run's learner trained on at some time: ``train_reward``'s, and those its
+    ``train_reward_switch`` adds (``{}`` for none, or a pipeline without them)."""
+    run = _run_config(folder)
+    return {**(run.get("train_reward") or {}), **((run.get("train_reward_switch") or {}).get("reward") or {})}
 
 
 def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:
@@ -524,10 +526,15 @@ def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     learner = "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO"
     level = make_config(scenario, **env_kwargs).action_level  # the scenario's own level when the run set none
     text = f"{scenario} scenario, {level} level: {learner}, {record['minutes']:g} min, training seed {record['seed']}"
-    shaping = _shaping(folder)
+    run = _run_config(folder)
+    shaping = run.get("train_reward") or {}
     if shaping:
         text += ", trained on a shaped reward (" + ", ".join(f"{k}={v}" for k, v in shaping.items()) + ")"
-    period = _run_config(folder).get("train_dt")
+    switch = run.get("train_reward_switch")
+    if switch:
+        fields = ", ".join(f"{k}={v}" for k, v in switch["reward"].items())
+        text += f", from {float(switch['after']):.0%} of the budget on with {fields}"
+    period = run.get("train_dt")
     if period is not None:
         text += f", deciding every {float(period):g} s in training"
     return f"{text} ({row.note})" if row.note else text

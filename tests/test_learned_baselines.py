@@ -168,6 +168,9 @@ def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {}
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {sigma_coordination: 5.0}\n")
     assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
+    switched = "train_reward: {}\ntrain_reward_switch: {after: 0.4, reward: {fine_share: 0.3}}\n"
+    (tmp_path / "config.yaml").write_text(switched)
+    assert lb._shaping(tmp_path) == {"fine_share": 0.3}  # its later returns are in the switched reward's units
 
 
 def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypatch):
@@ -179,6 +182,11 @@ def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypat
     assert "shaped reward (sigma_cross_track=5.0)" in text and text.endswith("deciding every 0.5 s in training")
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_dt: null\n")
     assert "deciding" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
+    switch = "train_reward_switch: {after: 0.35, reward: {fine_share: 0.3, fine_terms: [coordination]}}"
+    (tmp_path / "config.yaml").write_text(f"algo: mappo\n{switch}\n")
+    text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
+    assert text.endswith("from 35% of the budget on with fine_share=0.3, fine_terms=['coordination']")
+    assert "shaped reward (" not in text
 
 
 def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_on_the_benchmark_s_reward(
