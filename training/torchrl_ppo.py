@@ -107,8 +107,8 @@ running keep their episode). For example ``{after: 0.4, reward: {fine_share:
 0.3}}`` trains on the benchmark's broad scales until the formations hold
 together, then adds a slope near the goal. The evaluation keeps the benchmark's
 reward, as always; ``progress.csv``'s ``reward_switched`` is 1 for the batches
-collected with the switched reward, whose returns are in its units. ``normalize_reward``'s running
-deviation carries over the switch.
+collected with the switched reward, whose returns are in its units.
+``normalize_reward``'s running deviation carries over the switch.
 
 ``initial_state_curriculum`` is a curriculum over the initial state, in the
 learner's env only: before each iteration the training env draws its
