@@ -893,7 +893,7 @@ class StepKernel:
             np.array([*w.tracking_weights, w.effort]),
             np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
         )
-        self.tail = (w.total_weight if w.terminal_penalty else 0.0, *self._ends)
+        self.tail = (w.terminal_rate, *self._ends)
 
     def run(
         self,

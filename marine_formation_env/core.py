@@ -115,7 +115,7 @@ __all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
 #: Appended to a wrong-shape message of a state array.
 COLUMNS_HINT = " (columns x, y, psi, u, v, r)"
 
-REWARD_COMPONENTS = ("cross_track", "heading", "coordination", "speed", "effort", "terminal")
+REWARD_COMPONENTS = (*TRACKING_TERMS, "effort", "terminal")
 
 
 @dataclass
@@ -701,9 +701,8 @@ class FormationCore:
             out_of_bounds |= np.any(np.abs(e) > cfg.corridor, axis=1)
         collision = min_separation(s) < cfg.safety_distance
         terminated = out_of_bounds | collision
-        rate = w.total_weight if w.terminal_penalty else 0.0
         components["terminal"] = np.broadcast_to(
-            terminal_term(terminated, rate, cfg.horizon - self.time)[:, None], (self.num_envs, self.n)
+            terminal_term(terminated, w.terminal_rate, cfg.horizon - self.time)[:, None], (self.num_envs, self.n)
         ).copy()
         reward = sum(components.values())
         truncated = (self.steps >= cfg.max_steps) & ~terminated

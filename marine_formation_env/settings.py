@@ -207,7 +207,12 @@ class RewardConfig:
     @property
     def total_weight(self) -> float:
         """Σ_k w_k: the largest cost rate [1/s]."""
-        return self.cross_track + self.heading + self.coordination + self.speed + self.effort
+        return sum(self.tracking_weights) + self.effort
+
+    @property
+    def terminal_rate(self) -> float:
+        """The rate [1/s] an early end charges per second left: Σ_k w_k with ``terminal_penalty``, else 0."""
+        return self.total_weight if self.terminal_penalty else 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -27,6 +27,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E4
 import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
 from marine_formation_env.scenarios import make_config  # noqa: E402
+from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
@@ -214,7 +215,7 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
     # closing evaluation (and the saved env_kwargs) keep the benchmark's reward, which is < 0 for any policy
     out = tmp_path / "shaped"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    for item in [*TINY, *(f"train_reward.{k}=0.0" for k in ("cross_track", "heading", "coordination", "speed"))]:
+    for item in [*TINY, *(f"train_reward.{k}=0.0" for k in TRACKING_TERMS)]:
         args += ["--set", item]
     assert main([*args, "--set", "train_reward.terminal_penalty=false"]) == 0
     rows = (out / "progress.csv").read_text().splitlines()[1:]
@@ -234,7 +235,7 @@ def test_train_reward_switch_changes_the_learner_s_reward_once_at_its_fraction_o
     rewards = record_calls(monkeypatch, MarineFormationTorchEnv, "set_reward")
     out = tmp_path / "switched"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    zero = [f"train_reward.{k}=0.0" for k in ("cross_track", "heading", "coordination", "speed")]
+    zero = [f"train_reward.{k}=0.0" for k in TRACKING_TERMS]
     for item in [*TINY, *zero, "train_reward.terminal_penalty=false"]:
         args += ["--set", item]
     assert main([*args, "--set", "train_reward_switch={'after': 0.5, 'reward': {'coordination': 1.0}}"]) == 0
