@@ -181,10 +181,8 @@ class RewardConfig:
         for f in dataclasses.fields(self):
             if f.name in ("terminal_penalty", "fine_terms"):
                 continue
-            value = getattr(self, f.name)
-            check_number("reward", f.name, value, strict=f.name == "fine_scale")
-            if f.name.startswith("sigma_") and value == 0:
-                raise ConfigError(f"reward.{f.name} must be > 0, got {value!r}")
+            strict = f.name == "fine_scale" or f.name.startswith("sigma_")
+            check_number("reward", f.name, getattr(self, f.name), strict=strict)
         if self.fine_share > 1.0:
             raise ConfigError(f"reward.fine_share must be a share in [0, 1], got {self.fine_share!r}")
 

@@ -274,5 +274,5 @@ def test_train_reward_shapes_every_team_s_training_env_and_nothing_else():
     unshaped.close()
     with pytest.raises(TrainConfigError, match="train_reward must be a mapping of reward fields, got 5"):
         validate({**load_config(ANY_N), "train_reward": 5})
-    with pytest.raises(TrainConfigError, match="sigma_coordination must be > 0, got 0"):
+    with pytest.raises(TrainConfigError, match="sigma_coordination must be a finite number > 0, got 0"):
         validate({**load_config(ANY_N), "train_reward": {"sigma_coordination": 0}})

@@ -79,9 +79,13 @@ def test_terminal_penalty_must_be_a_boolean(value):
         ("fine_scale", 0.0, "> 0"),
         ("fine_scale", -1.0, "> 0"),
         ("fine_scale", "1", "finite number"),
+        ("sigma_cross_track", 0.0, "> 0"),
+        ("sigma_heading", -0.2, "> 0"),
+        ("sigma_speed", float("inf"), "finite number"),
+        ("cross_track", -1.0, "≥ 0"),
     ],
 )
-def test_the_fine_reward_share_and_scale_are_checked(field, value, message):
+def test_the_reward_weights_scales_and_fine_share_are_checked(field, value, message):
     pattern = rf"reward\.{field} must be .*{re.escape(message)}.*got {re.escape(repr(value))}"
     with pytest.raises(ConfigError, match=pattern):
         make_config("paper", reward={field: value})

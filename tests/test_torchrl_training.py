@@ -170,7 +170,7 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("action_scale=0.5", "action_scale 0.5 needs distribution: normal"),
         ("train_reward=[1]", "train_reward must be a mapping of reward fields, got [1]"),
         ("train_reward.sigma_x=1", "unknown reward key(s) ['sigma_x']"),
-        ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be > 0, got 0"),
+        ("train_reward.sigma_coordination=0", "reward.sigma_coordination must be a finite number > 0, got 0"),
         (
             "initial_state_curriculum={'start': 2, 'until': 0.5}",
             "initial_state_curriculum.start must lie in [0, 1], got 2",
