@@ -610,7 +610,10 @@ def _resolve_workspace(
     far as a vessel could go in the horizon, widened by the lanes, the
     corridor and 250 m.
     """
-    if s.workspace is None and not np.isfinite(2.0 * s.u_max * s.horizon + 1e3):
+    # how far a vessel can go along the path in the horizon: ℓ̇ can exceed u on an inner lane of a curved
+    # path, so twice u_max·horizon is a generous bound there (and the straight box needs less)
+    reach = 2.0 * s.u_max * s.horizon
+    if s.workspace is None and not np.isfinite(reach + 1e3):
         raise ConfigError(
             f"horizon = {s.horizon} s at u_max = {s.u_max} m/s is too long for the default workspace, which must "
             "hold the whole run: give a shorter horizon or an explicit workspace"
@@ -618,7 +621,6 @@ def _resolve_workspace(
     if s.workspace is None and not path.is_straight:
         spread = noise.as_array()
         ell = path.closest(nominal[:, 0], nominal[:, 1])
-        reach = 2.0 * s.u_max * s.horizon  # ℓ̇ can exceed u on an inner lane: a generous bound
         points = path.points(float(np.min(ell)) - spread[0] - 500.0, float(np.max(ell)) + spread[0] + reach)
         margin = float(np.max(np.abs(offsets[:, 1]))) + corridor + float(spread[1]) + 250.0
         return (
