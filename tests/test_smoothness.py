@@ -115,6 +115,28 @@ def test_the_term_runs_through_every_pair_before_it_repeats_one() -> None:
     assert term.mean_distance == pytest.approx(100.5)
 
 
+@pytest.mark.parametrize(("pairs", "expected"), [(None, 64), (16, 16)])
+def test_each_step_draws_temporal_smoothness_pairs_pairs(pairs, expected) -> None:
+    model = SmoothPPO("MlpPolicy", "Pendulum-v1", temporal_smoothness=1.0, temporal_smoothness_pairs=pairs, **PPO_KW)
+    sizes: list[int] = []
+    mean_action = model._mean_action
+    model._mean_action = lambda obs: (sizes.append(len(obs)), mean_action(obs))[1]
+    model.learn(256)  # one rollout of 256 steps, 255 pairs (one episode of 200 steps ends inside: 254)
+    assert max(sizes) == expected
+    # every call runs both sides of a pair batch; 4 epochs × 4 minibatches of PPO's, one batch of pairs each
+    assert len(sizes) == 2 * 4 * 4
+    assert all(size == expected for size in sizes[: 2 * (254 // expected)])
+
+
+@pytest.mark.parametrize("pairs", [0, -1, 2.5, True, "16"])
+def test_a_bad_pair_count_is_refused_by_name(pairs: object) -> None:
+    message = f"temporal_smoothness_pairs must be a whole number >= 1 or None, got {pairs!r}"
+    with pytest.raises(ValueError, match=message):
+        SmoothPPO("MlpPolicy", "Pendulum-v1", temporal_smoothness=1.0, temporal_smoothness_pairs=pairs, device="cpu")
+    with pytest.raises(TrainConfigError, match="temporal_smoothness_pairs must be a whole number ≥ 1"):
+        validate({"algo": "ppo", "scenario": "paper", "temporal_smoothness_pairs": pairs})
+
+
 @pytest.mark.parametrize(("before", "after", "batch", "message"), [
     (torch.zeros(3, 1), torch.zeros(2, 1), 2, "pairs need as many"),
     (torch.zeros(0, 1), torch.zeros(0, 1), 2, "at least one pair"),

@@ -510,6 +510,27 @@ def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_
         resolve({"temporal_smoothness": -1.0}, seed=0)
 
 
+@pytest.mark.parametrize(("pairs", "expected"), [(None, 64), (10, 10)])
+def test_the_smoothness_term_draws_temporal_smoothness_pairs_formation_steps_per_minibatch_step(pairs, expected):
+    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, None, "state_independent")
+    cfg = resolve({"temporal_smoothness": 1.0, "minibatch_size": 64, "temporal_smoothness_pairs": pairs}, seed=0)
+    obs = torch.randn(4, 32, 3, 7)  # 128 formation-steps of 3 vessels
+    data = TensorDict({("vessel", "observation"): obs, ("next", "vessel", "observation"): obs}, batch_size=[4, 32])
+    term = trainer._smoothness_term(actor, data, cfg, 0)
+    seen = []
+    net = term.mean
+    term.mean = lambda o: (seen.append(tuple(o.shape)), net(o))[1]
+    term()
+    assert seen == [(expected, 3, 7)] * 2  # the next observations and these, each a (pairs, vessels, entries) batch
+
+
+@pytest.mark.parametrize("pairs", [0, 2.5, "64", -3])
+def test_a_bad_temporal_smoothness_pairs_is_refused_by_name(pairs):
+    message = f"temporal_smoothness_pairs must be a whole number ≥ 1, got {pairs!r}"
+    with pytest.raises(trainer.TrainConfigError, match=message):
+        resolve({"temporal_smoothness_pairs": pairs}, seed=0)
+
+
 def test_an_unreadable_policy_file_is_named(tmp_path):
     (tmp_path / "policy.pt").write_bytes(b"not a torch file")
     with pytest.raises(ValueError, match="cannot load the policy"):

@@ -124,6 +124,7 @@ POSITIVE_INTS = (
     "target_update_interval",
     "policy_delay",
     "stats_window_size",
+    "temporal_smoothness_pairs",
 )
 #: Hyperparameters that must be numbers in a closed interval; ``None`` means unbounded.
 NUMBER_RANGES: dict[str, tuple[float | None, float | None]] = {

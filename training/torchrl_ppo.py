@@ -38,6 +38,7 @@ nest; unknown keys and bad values are refused by name):
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
 | ``temporal_smoothness`` | λ ≥ 0 of CAPS' temporal term on the policy's mean (below); 0: PPO itself | 0.0 |
+| ``temporal_smoothness_pairs`` | formation-step pairs of the term per minibatch (null: ``minibatch_size``) | null |
 | ``inputs`` | ``raw``, or ``predicted``: the networks read the slot network's fixed input map (below) | ``raw`` |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
@@ -132,8 +133,8 @@ returns stay comparable.
 
 ``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
 (:mod:`training.smoothness`): each minibatch's PPO loss gains ``λ · mean
-|μ(o') − μ(o)|`` over ``minibatch_size`` formation-steps' worth of every
-vessel's pairs of an observation ``o`` and the next one ``o'`` of the same
+|μ(o') − μ(o)|`` over ``temporal_smoothness_pairs`` (default ``minibatch_size``)
+formation-steps' worth of every vessel's pairs of an observation ``o`` and the next one ``o'`` of the same
 episode (the batch's ``("next", "vessel", "observation")``, so the last
 observation of an episode still pairs with the one before it), μ the
 deterministic action before clipping: the Gaussian's mean in the env's units
@@ -242,6 +243,7 @@ DEFAULTS: dict[str, Any] = {
     "epochs": 4,
     "minibatch_size": 1600,
     "temporal_smoothness": 0.0,
+    "temporal_smoothness_pairs": None,
     "inputs": "raw",
     "normalize_observations": False,
     "normalize_advantage": False,
@@ -304,6 +306,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg["target_kl"] = _positive("target_kl", cfg["target_kl"])
     if cfg["threads"] is not None:
         cfg["threads"] = _whole("threads", cfg["threads"], 1)
+    if cfg["temporal_smoothness_pairs"] is not None:
+        cfg["temporal_smoothness_pairs"] = _whole("temporal_smoothness_pairs", cfg["temporal_smoothness_pairs"], 1)
     if cfg["action_head_gain"] is not None:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
@@ -945,7 +949,8 @@ def _smoothness_term(actor: Any, data: Any, cfg: dict[str, Any], iteration: int)
         data.get(key).flatten(0, -3) for key in (("vessel", "observation"), ("next", "vessel", "observation"))
     )
     rng = np.random.default_rng([cfg["seed"], iteration])  # reproducible with the run's seed
-    return SmoothnessTerm(mean, before, after, cfg["temporal_smoothness"], cfg["minibatch_size"], rng)
+    pairs = cfg["temporal_smoothness_pairs"] or cfg["minibatch_size"]
+    return SmoothnessTerm(mean, before, after, cfg["temporal_smoothness"], pairs, rng)
 
 
 def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
