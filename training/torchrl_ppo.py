@@ -133,10 +133,11 @@ returns stay comparable.
 
 ``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
 (:mod:`training.smoothness`): each minibatch's PPO loss gains ``λ · mean
-|μ(o') − μ(o)|`` over ``temporal_smoothness_pairs`` (default ``minibatch_size``)
-formation-steps' worth of every vessel's pairs of an observation ``o`` and the next one ``o'`` of the same
-episode (the batch's ``("next", "vessel", "observation")``, so the last
-observation of an episode still pairs with the one before it), μ the
+|μ(o') − μ(o)|`` over ``temporal_smoothness_pairs`` (default
+``minibatch_size``) formation-steps' worth of every vessel's pairs of an
+observation ``o`` and the next one ``o'`` of the same episode (the batch's
+``("next", "vessel", "observation")``, so the last observation of an
+episode still pairs with the one before it), μ the
 deterministic action before clipping: the Gaussian's mean in the env's units
 with ``distribution: normal``, ``tanh`` of it with ``tanh_normal``. Rewards,
 the logged returns and the evaluation are unchanged; ``progress.csv`` logs the
