@@ -254,12 +254,19 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
     return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
 
 
+def _message(pairs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
+    """The message network φ of :func:`slot_features` (two tanh layers) on ``[own, slot]`` pairs."""
+    h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
+    return np.tanh(h @ weights["message_w1"] + weights["message_b1"])
+
+
 def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
     """``training.slot_policy.SlotFeatures`` in numpy (float64); ``weights``: ``{name: array}``, layers ``x @ w + b``.
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
     ``speed_error_scale`` ``s`` [m/s] if the network reads its own speed error ``tanh((u − u_d)/s)`` as one more
-    own input (``SlotFeatures(speed_error=s)``).
+    own input (``SlotFeatures(speed_error=s)``), and ``zero_at_agreement`` (1) if each message is measured from
+    that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
     """
     own, slots = _own_and_slots(obs)
     if "speed_error_scale" in weights:
@@ -268,8 +275,12 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
         own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1])), slots], axis=-1)
-    h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
-    messages = np.tanh(h @ weights["message_w1"] + weights["message_b1"]) * heard
+    messages = _message(pairs, weights)
+    if float(weights.get("zero_at_agreement", 0.0)):  # minus the message of a neighbour that agrees
+        agreed = pairs.copy()
+        agreed[..., own.shape[-1] + 1 : own.shape[-1] + 3] = 0.0  # Δθ and Δẋ; the link bit and the age kept
+        messages = messages - _message(agreed, weights)
+    messages = messages * heard
     total = messages.sum(axis=-2)
     mean = total / np.maximum(heard.sum(axis=-2), 1.0)
     return np.concatenate([np.tanh(own @ weights["own_w0"] + weights["own_b0"]), total, mean], axis=-1)
@@ -405,6 +416,8 @@ def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
     out["own_w0"], out["own_b0"] = linear(extractor.own[0])
     if extractor.speed_error is not None:
         out["speed_error_scale"] = np.array(extractor.speed_error)
+    if extractor.zero_at_agreement:
+        out["zero_at_agreement"] = np.array(1.0)
     return out
 
 

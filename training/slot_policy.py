@@ -27,7 +27,16 @@ them as a set:
 * with ``speed_error = s`` [m/s] (default None: off) the own inputs gain one
   entry, ``tanh((u − u_d)/s)``: the own speed error, which the fixed scales
   above leave at 0.024 of an input for a 0.12 m/s offset (u and u_d are each
-  divided by 5 m/s), read steeply near 0 and bounded far from it.
+  divided by 5 m/s), read steeply near 0 and bounded far from it;
+* with ``zero_at_agreement = True`` (default False) each message is measured
+  from the message of a neighbour in agreement, ``m_k = φ([own, slot_k]) −
+  φ([own, slot_k⁰])``, where ``slot_k⁰`` keeps the link bit and the age but
+  has Δθ = 0 and Δẋ = 0: a neighbour that agrees adds nothing, as in the
+  paper's law (20), whose sum over the in-neighbours is 0 at agreement. A
+  vessel whose neighbours all agree then commands what a vessel that hears
+  no one does, so a chain has no steady offset per link for its length to
+  multiply (without it, the first row's policies ended chains of 20 with
+  every follower 0.06–0.11 m behind the vessel it hears: docs/results.md).
 
 Nothing depends on the number of slots, so the weights trained on teams of 3
 to 6 (observations padded to one length with ``observation_slots``) act in a
@@ -62,11 +71,19 @@ __all__ = ["SlotFeatures"]
 class SlotFeatures(BaseFeaturesExtractor):
     """Features ``[ψ(own), Σ heard messages, mean heard message]`` of size ``3 · hidden`` (module docstring)."""
 
-    def __init__(self, observation_space: spaces.Box, hidden: int = 64, speed_error: float | None = None) -> None:
+    def __init__(
+        self,
+        observation_space: spaces.Box,
+        hidden: int = 64,
+        speed_error: float | None = None,
+        zero_at_agreement: bool = False,
+    ) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
         ok = isinstance(speed_error, int | float) and not isinstance(speed_error, bool) and 0 < speed_error < math.inf
         if speed_error is not None and not ok:
             raise ValueError(f"speed_error must be a speed scale > 0 [m/s] or None, got {speed_error!r}")
+        if not isinstance(zero_at_agreement, bool):
+            raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
         self.hidden = hidden
         self.own_scale: torch.Tensor
@@ -75,6 +92,7 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
         self.speed_error = None if speed_error is None else float(speed_error)
+        self.zero_at_agreement = zero_at_agreement
         own_size = OWN_SIZE if speed_error is None else OWN_SIZE + 1
         if self.speed_error is not None:  # a buffer only when on: networks saved without it still load strictly
             self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
@@ -92,7 +110,11 @@ class SlotFeatures(BaseFeaturesExtractor):
         own_size = own.shape[-1]
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         pairs = torch.cat([own.unsqueeze(-2).expand(*slots.shape[:-1], own_size), slots], dim=-1)
-        messages = self.message(pairs) * heard
+        messages = self.message(pairs)
+        if self.zero_at_agreement:  # minus the message of a neighbour with Δθ = Δẋ = 0 (link bit and age kept)
+            agreed = torch.cat([slots[..., :1], torch.zeros_like(slots[..., 1:3]), slots[..., 3:]], dim=-1)
+            messages = messages - self.message(torch.cat([pairs[..., :own_size], agreed], dim=-1))
+        messages = messages * heard
         total = messages.sum(dim=-2)
         mean = total / heard.sum(dim=-2).clamp(min=1.0)
         return torch.cat([self.own(own), total, mean], dim=-1)
