@@ -20,7 +20,15 @@ from gymnasium import spaces
 
 from baselines.pretrained import _sb3_slot_features, export_run, load_pretrained, slot_features
 from marine_formation_env import parallel_env
-from marine_formation_env.rules import CURVATURE, DESIRED_SPEED, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, SURGE
+from marine_formation_env.rules import (
+    CURVATURE,
+    CURVATURE_AHEAD,
+    DESIRED_SPEED,
+    LANE_OFFSET,
+    OWN_SIZE,
+    SLOT_SIZE,
+    SURGE,
+)
 from training import train as train_module
 from training.config import TrainConfigError, load_config, team_overrides, validate
 from training.learned import load_learned_policy
@@ -93,6 +101,52 @@ def test_the_own_speed_error_input_is_tanh_of_u_minus_u_d_over_its_scale_in_torc
     for bad in (0.0, -0.1, float("inf"), True, "0.2"):
         with pytest.raises(ValueError, match=f"speed_error must be a speed scale > 0 \\[m/s\\] or None, got {bad!r}"):
             SlotFeatures(box, speed_error=bad)
+
+
+def _agreeing(rng: np.random.Generator, batch: int, slots: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observations whose heard neighbours all agree (Δθ predicted to now = 0, Δẋ = 0), and the same own parts
+    hearing no one. The own part has ψ = v = κ = 0, so ẋ_i = u and a message of age τ agrees at Δθ = u·τ."""
+    obs = _observations(rng, batch, slots)
+    own = obs[:, :OWN_SIZE]
+    own[:, [1, 3, CURVATURE, CURVATURE_AHEAD]] = 0.0
+    slot = obs[:, OWN_SIZE:].reshape(batch, slots, SLOT_SIZE)
+    slot[..., 3] = np.abs(slot[..., 3]) * slot[..., 0]  # ages ≥ 0 where heard
+    slot[..., 2] = 0.0
+    slot[..., 1] = own[:, None, 2] * slot[..., 3]  # u·τ: 0 over an ideal link (τ = 0)
+    slot[:, 0, :] = [1.0, 0.0, 0.0, 0.0]  # at least one heard, over an ideal link
+    alone = np.concatenate([own, np.zeros((batch, slots * SLOT_SIZE))], axis=1)
+    return np.concatenate([own, slot.reshape(batch, -1)], axis=1), alone
+
+
+def test_zero_at_agreement_makes_neighbours_that_agree_read_as_no_neighbours_in_torch_and_numpy():
+    torch.manual_seed(3)
+    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 5,), np.float32)
+    extractor = SlotFeatures(box, hidden=16, zero_at_agreement=True)
+    weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
+    assert float(weights["zero_at_agreement"]) == 1.0
+    agreeing, alone = _agreeing(np.random.default_rng(3), 32, 5)
+    # what the paper's law (20) does: a sum over in-neighbours of terms that vanish at agreement, so a follower
+    # whose leader agrees commands what the leader, hearing no one, commands (no steady offset per link)
+    features = slot_features(agreeing, weights)
+    np.testing.assert_allclose(features, slot_features(alone, weights), atol=1e-12)
+    np.testing.assert_allclose(features[:, 16:], 0.0, atol=1e-12)  # the sum and the mean of the messages
+    with torch.no_grad():
+        theirs = extractor(torch.as_tensor(agreeing, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(theirs, features, atol=2e-5)  # float32 rounding
+    # a neighbour that does not agree still counts, in torch and numpy alike
+    disagreeing = agreeing.copy()
+    disagreeing[:, OWN_SIZE + 1] = 3.0  # the first slot's Δθ: 3 m
+    away = slot_features(disagreeing, weights)
+    assert (np.abs(away[:, 16:] - features[:, 16:]).max(axis=1) > 1e-3).all()
+    with torch.no_grad():
+        theirs = extractor(torch.as_tensor(disagreeing, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(theirs, away, atol=2e-5)
+    # without the option (the default), agreeing neighbours shift the features: the offset the option removes
+    plain = _numpy_weights(_extractor(5, seed=3))
+    assert np.abs(slot_features(agreeing, plain) - slot_features(alone, plain)).max() > 1e-3
+    for bad in (1, "yes", None, 0.0):
+        with pytest.raises(ValueError, match=f"zero_at_agreement must be True or False, got {bad!r}"):
+            SlotFeatures(box, zero_at_agreement=bad)
 
 
 def test_the_features_ignore_the_order_of_the_slots_and_empty_padding():
