@@ -214,6 +214,9 @@ class MLPPolicy(BatchPolicy):
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
+#: A slot network's slot inputs (link bit, Δθ, Δẋ, age and, if on, tanh(Δθ/s)) as a neighbour in agreement
+#: has them, by multiplication: Δθ, Δẋ and tanh(Δθ/s) 0, the link bit and the age kept (``zero_at_agreement``).
+AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0, 0.0])
 
 
 def own_inputs(own: np.ndarray) -> np.ndarray:
@@ -265,8 +268,9 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
     ``speed_error_scale`` ``s`` [m/s] if the network reads its own speed error ``tanh((u − u_d)/s)`` as one more
-    own input (``SlotFeatures(speed_error=s)``), and ``zero_at_agreement`` (1) if each message is measured from
-    that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
+    own input (``SlotFeatures(speed_error=s)``), ``coordination_error_scale`` ``c`` [m] if each slot gains the
+    input ``tanh(Δθ/c)`` (``SlotFeatures(coordination_error=c)``), and ``zero_at_agreement`` (1) if each message is
+    measured from that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
     """
     own, slots = _own_and_slots(obs)
     if "speed_error_scale" in weights:
@@ -274,12 +278,14 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
         error = np.tanh((obs[..., SURGE] - obs[..., DESIRED_SPEED]) / weights["speed_error_scale"])
         own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
-    pairs = np.concatenate([np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1])), slots], axis=-1)
-    messages = _message(pairs, weights)
+    if "coordination_error_scale" in weights:  # tanh(Δθ/s) of the Δθ predicted to now, in metres
+        steep = np.tanh(slots[..., 1:2] * SLOT_SCALE[1] / weights["coordination_error_scale"])
+        slots = np.concatenate([slots, steep], axis=-1)
+    own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
+    messages = _message(np.concatenate([own_k, slots], axis=-1), weights)
     if float(weights.get("zero_at_agreement", 0.0)):  # minus the message of a neighbour that agrees
-        agreed = pairs.copy()
-        agreed[..., own.shape[-1] + 1 : own.shape[-1] + 3] = 0.0  # Δθ and Δẋ; the link bit and the age kept
-        messages = messages - _message(agreed, weights)
+        agreed = slots * AGREEMENT_MASK[: slots.shape[-1]]
+        messages = messages - _message(np.concatenate([own_k, agreed], axis=-1), weights)
     messages = messages * heard
     total = messages.sum(axis=-2)
     mean = total / np.maximum(heard.sum(axis=-2), 1.0)
@@ -416,6 +422,8 @@ def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
     out["own_w0"], out["own_b0"] = linear(extractor.own[0])
     if extractor.speed_error is not None:
         out["speed_error_scale"] = np.array(extractor.speed_error)
+    if extractor.coordination_error is not None:
+        out["coordination_error_scale"] = np.array(extractor.coordination_error)
     if extractor.zero_at_agreement:
         out["zero_at_agreement"] = np.array(1.0)
     return out
