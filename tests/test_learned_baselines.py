@@ -187,6 +187,10 @@ def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypat
     text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
     assert text.endswith("from 35% of the budget on with fine_share=0.3, fine_terms=['coordination']")
     assert "shaped reward (" not in text
+    (tmp_path / "config.yaml").write_text("algo: ppo\ntemporal_smoothness: 0.01\n")
+    assert lb._description(lb.ROWS["paper_force"], tmp_path, record).endswith("temporal smoothness term λ=0.01")
+    (tmp_path / "config.yaml").write_text("algo: ppo\ntemporal_smoothness: 0.0\n")
+    assert "smoothness" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
 
 
 def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_on_the_benchmark_s_reward(
