@@ -156,7 +156,7 @@ class MLPPolicy(BatchPolicy):
         self.std = np.asarray(std, dtype=np.float64)
         self.clip = float(clip)
         self.squash = squash
-        self.features = None if features is None else {k: np.asarray(v, dtype=np.float64) for k, v in features.items()}
+        self.features = None if features is None else _checked_features(features)
         #: the observation length it takes (None: any 10 + 4·slots, a ``slots`` network)
         self.observation_dim: int | None = int(self.weights[0].shape[0]) if features is None else None
         self.action_dim = int(action_dim)
@@ -214,8 +214,8 @@ class MLPPolicy(BatchPolicy):
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
-#: A slot network's slot inputs (link bit, Δθ, Δẋ, age and, if on, tanh(Δθ/s)) as a neighbour in agreement
-#: has them, by multiplication: Δθ, Δẋ and tanh(Δθ/s) 0, the link bit and the age kept (``zero_at_agreement``).
+#: A slot network's slot inputs (link bit, Δθ, Δẋ, age and, if on, tanh(Δθ/c)) as a neighbour in agreement
+#: has them, by multiplication: Δθ, Δẋ and tanh(Δθ/c) 0, the link bit and the age kept (``zero_at_agreement``).
 AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0, 0.0])
 
 
@@ -257,6 +257,28 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
     return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
 
 
+#: The arrays of :func:`slot_features`' weights: always, and optional (each option's).
+SLOT_WEIGHTS = ("message_w0", "message_b0", "message_w1", "message_b1", "own_w0", "own_b0")
+SLOT_OPTIONS = ("speed_error_scale", "coordination_error_scale", "zero_at_agreement")
+
+
+def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """:func:`slot_features`' weights as float64 arrays, or a ValueError naming what is missing, unknown or bad."""
+    out = {k: np.asarray(v, dtype=np.float64) for k, v in features.items()}
+    missing = [k for k in SLOT_WEIGHTS if k not in out]
+    unknown = [k for k in out if k not in SLOT_WEIGHTS + SLOT_OPTIONS]
+    if missing or unknown:
+        raise ValueError(f"slot network weights: missing {missing}, unknown {unknown}")
+    for name in ("speed_error_scale", "coordination_error_scale"):
+        if name in out and not (out[name].shape == () and 0 < float(out[name]) < np.inf):
+            raise ValueError(f"slot network weights: {name} must be one number > 0, got {out[name]!r}")
+    if "zero_at_agreement" in out and not (out["zero_at_agreement"].shape == () and out["zero_at_agreement"] == 1.0):
+        raise ValueError(
+            f"slot network weights: zero_at_agreement must be 1 if present, got {out['zero_at_agreement']!r}"
+        )
+    return out
+
+
 def _message(pairs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
     """The message network φ of :func:`slot_features` (two tanh layers) on ``[own, slot]`` pairs."""
     h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
@@ -278,12 +300,12 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
         error = np.tanh((obs[..., SURGE] - obs[..., DESIRED_SPEED]) / weights["speed_error_scale"])
         own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
-    if "coordination_error_scale" in weights:  # tanh(Δθ/s) of the Δθ predicted to now, in metres
+    if "coordination_error_scale" in weights:  # tanh(Δθ/c) of the Δθ predicted to now, in metres
         steep = np.tanh(slots[..., 1:2] * SLOT_SCALE[1] / weights["coordination_error_scale"])
         slots = np.concatenate([slots, steep], axis=-1)
     own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
     messages = _message(np.concatenate([own_k, slots], axis=-1), weights)
-    if float(weights.get("zero_at_agreement", 0.0)):  # minus the message of a neighbour that agrees
+    if "zero_at_agreement" in weights:  # minus the message of a neighbour that agrees
         agreed = slots * AGREEMENT_MASK[: slots.shape[-1]]
         messages = messages - _message(np.concatenate([own_k, agreed], axis=-1), weights)
     messages = messages * heard

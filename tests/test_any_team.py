@@ -18,7 +18,7 @@ pytest.importorskip("stable_baselines3")
 import torch
 from gymnasium import spaces
 
-from baselines.pretrained import _sb3_slot_features, export_run, load_pretrained, slot_features
+from baselines.pretrained import OWN_SCALE, SLOT_SCALE, _sb3_slot_features, export_run, load_pretrained, slot_features
 from marine_formation_env import parallel_env
 from marine_formation_env.rules import (
     CURVATURE,
@@ -182,6 +182,62 @@ def test_the_steep_coordination_input_is_tanh_of_the_predicted_gap_over_its_scal
             ValueError, match=f"coordination_error must be a length scale > 0 \\[m\\] or None, got {bad!r}"
         ):
             SlotFeatures(box, coordination_error=bad)
+
+
+def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agreeing_slot_by_hand(tmp_path):
+    """The messages written out from the definitions (module docstring), on aged links with Δẋ ≠ 0."""
+    torch.manual_seed(5)
+    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 4,), np.float32)
+    extractor = SlotFeatures(box, hidden=8, speed_error=0.2, coordination_error=1.0, zero_at_agreement=True)
+    weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
+    rng = np.random.default_rng(5)
+    obs = _observations(rng, 16, 4)
+    obs[:, OWN_SIZE + 3 :: SLOT_SIZE] = np.abs(obs[:, OWN_SIZE + 3 :: SLOT_SIZE])  # ages ≥ 0
+    own, slot = obs[:, :OWN_SIZE], obs[:, OWN_SIZE:].reshape(16, 4, SLOT_SIZE)
+    e, psi, u, v, kappa, lane = own[:, 0], own[:, 1], own[:, 2], own[:, 3], own[:, CURVATURE], own[:, LANE_OFFSET]
+    x_dot = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (lane + e))
+    gap = slot[..., 1] - (x_dot[:, None] - slot[..., 2]) * slot[..., 3]  # Δθ predicted to now [m]
+    own_in = np.concatenate(
+        [
+            np.column_stack([*own[:, :LANE_OFFSET].T, kappa * lane]) / OWN_SCALE,
+            np.tanh((u - own[:, DESIRED_SPEED]) / 0.2)[:, None],
+        ],
+        axis=1,
+    )
+    link, vel, age = slot[..., 0], slot[..., 2] / SLOT_SCALE[2], slot[..., 3] / SLOT_SCALE[3]
+
+    def phi(*columns):
+        x = np.concatenate([np.repeat(own_in[:, None, :], 4, axis=1), np.stack(columns, axis=-1)], axis=-1)
+        h = np.tanh(x @ weights["message_w0"] + weights["message_b0"])
+        return np.tanh(h @ weights["message_w1"] + weights["message_b1"])
+
+    zero = np.zeros_like(gap)
+    m = (phi(link, gap / SLOT_SCALE[1], vel, age, np.tanh(gap / 1.0)) - phi(link, zero, zero, age, zero)) * link[
+        ..., None
+    ]
+    heard = np.maximum(link.sum(axis=1), 1.0)[:, None]
+    features = slot_features(obs, weights)
+    np.testing.assert_allclose(features[:, 8:16], m.sum(axis=1), atol=1e-12)
+    np.testing.assert_allclose(features[:, 16:], m.sum(axis=1) / heard, atol=1e-12)
+    with torch.no_grad():
+        theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(theirs, features, atol=5e-5)  # float32 rounding
+    # a pretrained file carries every option, and bad option values in a file are refused by name
+    from baselines.pretrained import MLPPolicy
+
+    dim = obs.shape[1]
+    policy = MLPPolicy([np.ones((24, 1)) / 24], [np.zeros(1)], np.zeros(dim), np.ones(dim), np.inf, "clip", 1, weights)
+    again = MLPPolicy.from_arrays(policy.arrays(), 1)
+    np.testing.assert_array_equal(again.act_batch(obs), policy.act_batch(obs))
+    assert sorted(again.features) == sorted(weights)
+    for name, value, message in (
+        ("zero_at_agreement", np.array(0.0), "zero_at_agreement must be 1 if present"),
+        ("coordination_error_scale", np.array(-1.0), "coordination_error_scale must be one number > 0"),
+        ("speed_error_scale", np.array(np.nan), "speed_error_scale must be one number > 0"),
+        ("agreement", np.array(1.0), "unknown \\['agreement'\\]"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            MLPPolicy.from_arrays({**policy.arrays(), f"features_{name}": value}, 1)
 
 
 def test_the_features_ignore_the_order_of_the_slots_and_empty_padding():

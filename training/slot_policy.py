@@ -40,7 +40,7 @@ them as a set:
   vessel whose neighbours all agree then commands what a vessel that hears
   no one does, so a chain has no steady offset per link for its length to
   multiply (without it, the first row's policies ended chains of 20 with
-  every follower 0.06–0.11 m behind the vessel it hears: docs/results.md).
+  every follower 0.06–0.11 m off the vessel it hears: docs/results.md).
 
 Nothing depends on the number of slots, so the weights trained on teams of 3
 to 6 (observations padded to one length with ``observation_slots``) act in a
@@ -125,12 +125,12 @@ class SlotFeatures(BaseFeaturesExtractor):
             error = observations[..., SURGE : SURGE + 1] - observations[..., DESIRED_SPEED : DESIRED_SPEED + 1]
             own = torch.cat([own, torch.tanh(error / self.speed_error_scale)], dim=-1)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
-        if self.coordination_error is not None:  # tanh(Δθ/s) of the Δθ predicted to now, in metres
+        if self.coordination_error is not None:  # tanh(Δθ/c) of the Δθ predicted to now, in metres
             steep = torch.tanh(slots[..., 1:2] * self.slot_scale[1] / self.coordination_error_scale)
             slots = torch.cat([slots, steep], dim=-1)
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))
-        if self.zero_at_agreement:  # minus the message of a neighbour that agrees: Δθ, Δẋ (and tanh(Δθ/s)) 0
+        if self.zero_at_agreement:  # minus the message of a neighbour that agrees: Δθ, Δẋ (and tanh(Δθ/c)) 0
             agreed = slots * slots.new_tensor(AGREEMENT_MASK[: slots.shape[-1]])
             messages = messages - self.message(torch.cat([own_k, agreed], dim=-1))
         messages = messages * heard
