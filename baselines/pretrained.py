@@ -214,9 +214,9 @@ class MLPPolicy(BatchPolicy):
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
-#: A slot network's slot inputs (link bit, Δθ, Δẋ, age and, if on, tanh(Δθ/c)) as a neighbour in agreement
-#: has them, by multiplication: Δθ, Δẋ and tanh(Δθ/c) 0, the link bit and the age kept (``zero_at_agreement``).
-AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0, 0.0])
+#: A slot network's slot inputs (link bit, Δθ, Δẋ, age) as a neighbour in agreement has them, by
+#: multiplication: Δθ = Δẋ = 0, the link bit and the age kept (``zero_at_agreement``).
+AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0])
 
 
 def own_inputs(own: np.ndarray) -> np.ndarray:
@@ -259,7 +259,7 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
 
 #: The arrays of :func:`slot_features`' weights: always, and optional (each option's).
 SLOT_WEIGHTS = ("message_w0", "message_b0", "message_w1", "message_b1", "own_w0", "own_b0")
-SLOT_OPTIONS = ("speed_error_scale", "coordination_error_scale", "zero_at_agreement")
+SLOT_OPTIONS = ("speed_error_scale", "zero_at_agreement")
 
 
 def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -269,9 +269,9 @@ def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     unknown = [k for k in out if k not in SLOT_WEIGHTS + SLOT_OPTIONS]
     if missing or unknown:
         raise ValueError(f"slot network weights: missing {missing}, unknown {unknown}")
-    for name in ("speed_error_scale", "coordination_error_scale"):
-        if name in out and not (out[name].shape == () and 0 < float(out[name]) < np.inf):
-            raise ValueError(f"slot network weights: {name} must be one number > 0, got {out[name]!r}")
+    scale = out.get("speed_error_scale")
+    if scale is not None and not (scale.shape == () and 0 < float(scale) < np.inf):
+        raise ValueError(f"slot network weights: speed_error_scale must be one number > 0, got {scale!r}")
     if "zero_at_agreement" in out and not (out["zero_at_agreement"].shape == () and out["zero_at_agreement"] == 1.0):
         raise ValueError(
             f"slot network weights: zero_at_agreement must be 1 if present, got {out['zero_at_agreement']!r}"
@@ -290,9 +290,8 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
     ``speed_error_scale`` ``s`` [m/s] if the network reads its own speed error ``tanh((u − u_d)/s)`` as one more
-    own input (``SlotFeatures(speed_error=s)``), ``coordination_error_scale`` ``c`` [m] if each slot gains the
-    input ``tanh(Δθ/c)`` (``SlotFeatures(coordination_error=c)``), and ``zero_at_agreement`` (1) if each message is
-    measured from that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
+    own input (``SlotFeatures(speed_error=s)``), and ``zero_at_agreement`` (1) if each message is measured from
+    that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
     """
     own, slots = _own_and_slots(obs)
     if "speed_error_scale" in weights:
@@ -300,13 +299,10 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
         error = np.tanh((obs[..., SURGE] - obs[..., DESIRED_SPEED]) / weights["speed_error_scale"])
         own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
-    if "coordination_error_scale" in weights:  # tanh(Δθ/c) of the Δθ predicted to now, in metres
-        steep = np.tanh(slots[..., 1:2] * SLOT_SCALE[1] / weights["coordination_error_scale"])
-        slots = np.concatenate([slots, steep], axis=-1)
     own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
     messages = _message(np.concatenate([own_k, slots], axis=-1), weights)
     if "zero_at_agreement" in weights:  # minus the message of a neighbour that agrees
-        agreed = slots * AGREEMENT_MASK[: slots.shape[-1]]
+        agreed = slots * AGREEMENT_MASK
         messages = messages - _message(np.concatenate([own_k, agreed], axis=-1), weights)
     messages = messages * heard
     total = messages.sum(axis=-2)
@@ -444,8 +440,6 @@ def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
     out["own_w0"], out["own_b0"] = linear(extractor.own[0])
     if extractor.speed_error is not None:
         out["speed_error_scale"] = np.array(extractor.speed_error)
-    if extractor.coordination_error is not None:
-        out["coordination_error_scale"] = np.array(extractor.coordination_error)
     if extractor.zero_at_agreement:
         out["zero_at_agreement"] = np.array(1.0)
     return out

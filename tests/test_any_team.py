@@ -118,14 +118,12 @@ def _agreeing(rng: np.random.Generator, batch: int, slots: int) -> tuple[np.ndar
     return np.concatenate([own, slot.reshape(batch, -1)], axis=1), alone
 
 
-@pytest.mark.parametrize("coordination_error", [None, 0.5])
-def test_zero_at_agreement_makes_neighbours_that_agree_read_as_no_neighbours_in_torch_and_numpy(coordination_error):
+def test_zero_at_agreement_makes_neighbours_that_agree_read_as_no_neighbours_in_torch_and_numpy():
     torch.manual_seed(3)
     box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 5,), np.float32)
-    extractor = SlotFeatures(box, hidden=16, zero_at_agreement=True, coordination_error=coordination_error)
+    extractor = SlotFeatures(box, hidden=16, zero_at_agreement=True)
     weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
     assert float(weights["zero_at_agreement"]) == 1.0
-    assert ("coordination_error_scale" in weights) == (coordination_error is not None)
     agreeing, alone = _agreeing(np.random.default_rng(3), 32, 5)
     # what the paper's law (20) does: a sum over in-neighbours of terms that vanish at agreement, so a follower
     # whose leader agrees commands what the leader, hearing no one, commands (no steady offset per link)
@@ -151,44 +149,11 @@ def test_zero_at_agreement_makes_neighbours_that_agree_read_as_no_neighbours_in_
             SlotFeatures(box, zero_at_agreement=bad)
 
 
-def test_the_steep_coordination_input_is_tanh_of_the_predicted_gap_over_its_scale_in_torch_and_numpy():
-    torch.manual_seed(1)
-    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 3,), np.float32)
-    extractor = SlotFeatures(box, hidden=8, coordination_error=0.5)
-    assert extractor.message[0].in_features == OWN_SIZE + SLOT_SIZE + 1 and extractor.own[0].in_features == OWN_SIZE
-    # the message's first unit reads the new input alone through identities: tanh(tanh(tanh(Δθ/0.5)))
-    with torch.no_grad():
-        for layer in (extractor.message[0], extractor.message[2]):
-            layer.weight.zero_()
-            layer.bias.zero_()
-        extractor.message[0].weight[0, OWN_SIZE + SLOT_SIZE] = 1.0
-        extractor.message[2].weight[0, 0] = 1.0
-    obs = _observations(np.random.default_rng(4), 32, 3)
-    slots = obs[:, OWN_SIZE:].reshape(32, 3, SLOT_SIZE)
-    slots[..., 3] = 0.0  # ideal links: the predicted Δθ is the Δθ sent
-    slots[..., 1] = np.linspace(-2.0, 2.0, 96).reshape(32, 3) * slots[..., 0]
-    obs = np.concatenate([obs[:, :OWN_SIZE], slots.reshape(32, -1)], axis=1)
-    with torch.no_grad():
-        theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
-    expected = (np.tanh(np.tanh(np.tanh(slots[..., 1] / 0.5))) * slots[..., 0]).sum(axis=1)
-    np.testing.assert_allclose(theirs[:, 8], expected, atol=1e-5)  # the sum's first unit; float32 rounding
-    weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
-    assert float(weights["coordination_error_scale"]) == pytest.approx(0.5)
-    np.testing.assert_allclose(slot_features(obs, weights), theirs, atol=2e-5)
-    plain = SlotFeatures(box, hidden=8)
-    assert "coordination_error_scale" not in plain.state_dict()
-    for bad in (0.0, -1.0, float("nan"), True, "1"):
-        with pytest.raises(
-            ValueError, match=f"coordination_error must be a length scale > 0 \\[m\\] or None, got {bad!r}"
-        ):
-            SlotFeatures(box, coordination_error=bad)
-
-
 def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agreeing_slot_by_hand(tmp_path):
     """The messages written out from the definitions (module docstring), on aged links with Δẋ ≠ 0."""
     torch.manual_seed(5)
     box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 4,), np.float32)
-    extractor = SlotFeatures(box, hidden=8, speed_error=0.2, coordination_error=1.0, zero_at_agreement=True)
+    extractor = SlotFeatures(box, hidden=8, speed_error=0.2, zero_at_agreement=True)
     weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
     rng = np.random.default_rng(5)
     obs = _observations(rng, 16, 4)
@@ -212,9 +177,7 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
         return np.tanh(h @ weights["message_w1"] + weights["message_b1"])
 
     zero = np.zeros_like(gap)
-    m = (phi(link, gap / SLOT_SCALE[1], vel, age, np.tanh(gap / 1.0)) - phi(link, zero, zero, age, zero)) * link[
-        ..., None
-    ]
+    m = (phi(link, gap / SLOT_SCALE[1], vel, age) - phi(link, zero, zero, age)) * link[..., None]
     heard = np.maximum(link.sum(axis=1), 1.0)[:, None]
     features = slot_features(obs, weights)
     np.testing.assert_allclose(features[:, 8:16], m.sum(axis=1), atol=1e-12)
@@ -232,7 +195,7 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
     assert sorted(again.features) == sorted(weights)
     for name, value, message in (
         ("zero_at_agreement", np.array(0.0), "zero_at_agreement must be 1 if present"),
-        ("coordination_error_scale", np.array(-1.0), "coordination_error_scale must be one number > 0"),
+        ("speed_error_scale", np.array(-1.0), "speed_error_scale must be one number > 0"),
         ("speed_error_scale", np.array(np.nan), "speed_error_scale must be one number > 0"),
         ("agreement", np.array(1.0), "unknown \\['agreement'\\]"),
     ):

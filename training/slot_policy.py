@@ -28,10 +28,6 @@ them as a set:
   entry, ``tanh((u − u_d)/s)``: the own speed error, which the fixed scales
   above leave at 0.024 of an input for a 0.12 m/s offset (u and u_d are each
   divided by 5 m/s), read steeply near 0 and bounded far from it;
-* with ``coordination_error = c`` [m] (default None: off) each slot gains one
-  entry, ``tanh(Δθ/c)`` of the Δθ predicted to now: divided by 50 m, a 0.05 m
-  gap between neighbours is 0.001 of an input, and a ring of 20 closes such
-  gaps only as fast as the network responds to them;
 * with ``zero_at_agreement = True`` (default False) each message is measured
   from the message of a neighbour in agreement, ``m_k = φ([own, slot_k]) −
   φ([own, slot_k⁰])``, where ``slot_k⁰`` keeps the link bit and the age but
@@ -90,11 +86,9 @@ class SlotFeatures(BaseFeaturesExtractor):
         hidden: int = 64,
         speed_error: float | None = None,
         zero_at_agreement: bool = False,
-        coordination_error: float | None = None,
     ) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
         self.speed_error = _scale("speed_error", speed_error, "a speed scale > 0 [m/s]")
-        self.coordination_error = _scale("coordination_error", coordination_error, "a length scale > 0 [m]")
         if not isinstance(zero_at_agreement, bool):
             raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
@@ -103,18 +97,14 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
         self.speed_error_scale: torch.Tensor
-        self.coordination_error_scale: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
-        # buffers only when on: networks saved without them still load strictly
+        # a buffer only when on: networks saved without it still load strictly
         if self.speed_error is not None:
             self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
-        if self.coordination_error is not None:
-            self.register_buffer("coordination_error_scale", torch.tensor(self.coordination_error, dtype=torch.float32))
         own_size = OWN_SIZE + (speed_error is not None)
-        slot_size = SLOT_SIZE + (coordination_error is not None)
         self.message = nn.Sequential(
-            nn.Linear(own_size + slot_size, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
+            nn.Linear(own_size + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
         self.own = nn.Sequential(nn.Linear(own_size, hidden), nn.Tanh())
 
@@ -125,13 +115,10 @@ class SlotFeatures(BaseFeaturesExtractor):
             error = observations[..., SURGE : SURGE + 1] - observations[..., DESIRED_SPEED : DESIRED_SPEED + 1]
             own = torch.cat([own, torch.tanh(error / self.speed_error_scale)], dim=-1)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
-        if self.coordination_error is not None:  # tanh(Δθ/c) of the Δθ predicted to now, in metres
-            steep = torch.tanh(slots[..., 1:2] * self.slot_scale[1] / self.coordination_error_scale)
-            slots = torch.cat([slots, steep], dim=-1)
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))
-        if self.zero_at_agreement:  # minus the message of a neighbour that agrees: Δθ, Δẋ (and tanh(Δθ/c)) 0
-            agreed = slots * slots.new_tensor(AGREEMENT_MASK[: slots.shape[-1]])
+        if self.zero_at_agreement:  # minus the message of a neighbour that agrees: Δθ = Δẋ = 0
+            agreed = slots * slots.new_tensor(AGREEMENT_MASK)
             messages = messages - self.message(torch.cat([own_k, agreed], dim=-1))
         messages = messages * heard
         total = messages.sum(dim=-2)
