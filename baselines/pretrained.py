@@ -257,8 +257,9 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
     return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
 
 
-#: The arrays of :func:`slot_features`' weights: always, and optional (each option's).
+#: The arrays every :func:`slot_features` weights dict holds,
 SLOT_WEIGHTS = ("message_w0", "message_b0", "message_w1", "message_b1", "own_w0", "own_b0")
+#: and those an option adds (``SlotFeatures(speed_error=s)``, ``SlotFeatures(zero_at_agreement=True)``).
 SLOT_OPTIONS = ("speed_error_scale", "zero_at_agreement")
 
 
