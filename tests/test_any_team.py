@@ -18,7 +18,15 @@ pytest.importorskip("stable_baselines3")
 import torch
 from gymnasium import spaces
 
-from baselines.pretrained import OWN_SCALE, SLOT_SCALE, _sb3_slot_features, export_run, load_pretrained, slot_features
+from baselines.pretrained import (
+    OWN_SCALE,
+    SLOT_SCALE,
+    MLPPolicy,
+    _sb3_slot_features,
+    export_run,
+    load_pretrained,
+    slot_features,
+)
 from marine_formation_env import parallel_env
 from marine_formation_env.rules import (
     CURVATURE,
@@ -149,7 +157,7 @@ def test_zero_at_agreement_makes_neighbours_that_agree_read_as_no_neighbours_in_
             SlotFeatures(box, zero_at_agreement=bad)
 
 
-def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agreeing_slot_by_hand(tmp_path):
+def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agreeing_slot_by_hand():
     """The messages written out from the definitions (module docstring), on aged links with Δẋ ≠ 0."""
     torch.manual_seed(5)
     box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 4,), np.float32)
@@ -186,8 +194,6 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
         theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
     np.testing.assert_allclose(theirs, features, atol=5e-5)  # float32 rounding
     # a pretrained file carries every option, and bad option values in a file are refused by name
-    from baselines.pretrained import MLPPolicy
-
     dim = obs.shape[1]
     policy = MLPPolicy([np.ones((24, 1)) / 24], [np.zeros(1)], np.zeros(dim), np.ones(dim), np.inf, "clip", 1, weights)
     again = MLPPolicy.from_arrays(policy.arrays(), 1)

@@ -69,15 +69,6 @@ from training.inputs import predicted_inputs
 __all__ = ["SlotFeatures"]
 
 
-def _scale(name: str, value: float | None, what: str) -> float | None:
-    """An optional input scale: None (off) or a finite number > 0, else a ValueError naming it."""
-    if value is None:
-        return None
-    if not isinstance(value, int | float) or isinstance(value, bool) or not 0 < value < math.inf:
-        raise ValueError(f"{name} must be {what} or None, got {value!r}")
-    return float(value)
-
-
 class SlotFeatures(BaseFeaturesExtractor):
     """Features ``[ψ(own), Σ heard messages, mean heard message]`` of size ``3 · hidden`` (module docstring)."""
 
@@ -89,7 +80,9 @@ class SlotFeatures(BaseFeaturesExtractor):
         zero_at_agreement: bool = False,
     ) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
-        self.speed_error = _scale("speed_error", speed_error, "a speed scale > 0 [m/s]")
+        ok = isinstance(speed_error, int | float) and not isinstance(speed_error, bool) and 0 < speed_error < math.inf
+        if speed_error is not None and not ok:
+            raise ValueError(f"speed_error must be a speed scale > 0 [m/s] or None, got {speed_error!r}")
         if not isinstance(zero_at_agreement, bool):
             raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
@@ -98,12 +91,15 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
         self.speed_error_scale: torch.Tensor
+        self.agreement_mask: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
-        # a buffer only when on: networks saved without it still load strictly
-        if self.speed_error is not None:
+        self.speed_error = None if speed_error is None else float(speed_error)
+        own_size = OWN_SIZE if speed_error is None else OWN_SIZE + 1
+        if self.speed_error is not None:  # a buffer only when on: networks saved without it still load strictly
             self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
-        own_size = OWN_SIZE + (speed_error is not None)
+        if zero_at_agreement:  # not saved (persistent=False): it is a constant, and old state_dicts load strictly
+            self.register_buffer("agreement_mask", torch.tensor(AGREEMENT_MASK, dtype=torch.float32), persistent=False)
         self.message = nn.Sequential(
             nn.Linear(own_size + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
@@ -119,7 +115,7 @@ class SlotFeatures(BaseFeaturesExtractor):
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))
         if self.zero_at_agreement:  # minus the message of a neighbour that agrees: Δθ = Δẋ = 0
-            agreed = slots * slots.new_tensor(AGREEMENT_MASK)
+            agreed = slots * self.agreement_mask
             messages = messages - self.message(torch.cat([own_k, agreed], dim=-1))
         messages = messages * heard
         total = messages.sum(dim=-2)

@@ -12,10 +12,11 @@ minimizes PPO's loss plus
 where μ is the Gaussian's mean (the deterministic action, before clipping)
 and the pairs are those of one env entry within one episode of the rollout,
 ``temporal_smoothness_pairs`` of them per step (default: ``batch_size``),
-drawn in a shuffled order that runs through every pair before it repeats one. The distance is the one the benchmark's Δa
-column measures, on the noise-free action. Both terms share one backward
-pass, one gradient clipping and one optimizer step, so λ weighs the term
-against PPO's own gradient.
+drawn in a shuffled order that runs through every pair before it repeats
+one. The distance is the one the benchmark's Δa column measures, on the
+noise-free action. Both terms share one backward pass, one gradient
+clipping and one optimizer step, so λ weighs the term against PPO's own
+gradient.
 
 Unlike a cost on action changes in the learner's reward
 (:class:`training.vec_env.ActionChangePenalty`, which sees the sampled and
