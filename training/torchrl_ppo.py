@@ -41,6 +41,7 @@ nest; unknown keys and bad values are refused by name):
 | ``temporal_smoothness_pairs`` | formation-step pairs of the term per minibatch (null: ``minibatch_size``) | null |
 | ``inputs`` | ``raw``, or ``predicted``: the networks read the slot network's fixed input map (below) | ``raw`` |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
+| ``normalize_window`` | vessel-observations the observation statistics remember (below), or null: all | null |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
 | ``train_reward_switch`` | ``{after: f, reward: {…}}``: more reward fields from f of the budget on (below) | null |
@@ -76,7 +77,12 @@ front of the actor and the critic; ``normalize_advantage`` standardizes the
 advantages of each minibatch; ``normalize_reward`` divides the rewards the
 critic and the advantages see by the running standard deviation of the
 discounted return (clipped to ±10). The env's reward, the logged
-``mean_reward`` and the evaluation are unchanged.
+``mean_reward`` and the evaluation are unchanged. ``normalize_window: W``
+makes the observation statistics forget: before each batch of ``b``
+vessel-observations is merged, the statistics so far count as at most
+``W − b`` observations (none once ``b ≥ W``), so they describe about the
+last ``W`` observations, an exponential moving average, instead of every
+observation since the start (SB3's ``RunningMeanStd``, the default).
 
 ``inputs: predicted`` puts the slot network's fixed input map
 (:mod:`training.inputs`, parameter-free) in front of the actor and the critic:
@@ -249,6 +255,7 @@ DEFAULTS: dict[str, Any] = {
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
+    "normalize_window": None,
     "train_reward": {},
     "initial_state_curriculum": None,
     "train_reward_switch": None,
@@ -290,6 +297,13 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
+    if cfg["normalize_window"] is not None:
+        cfg["normalize_window"] = _whole("normalize_window", cfg["normalize_window"], 1)
+        if not cfg["normalize_observations"]:
+            raise TrainConfigError(
+                f"normalize_window = {cfg['normalize_window']} needs normalize_observations: true (it is the"
+                " window of those statistics)"
+            )
     if cfg["inputs"] not in INPUTS:
         raise TrainConfigError(f"inputs must be one of {list(INPUTS)}, got {cfg['inputs']!r}")
     if cfg["inputs"] == "predicted" and cfg["normalize_observations"]:
@@ -399,7 +413,7 @@ def _action_scale(value: Any, size: int) -> float | list[float]:
 # ----------------------------------------------------------------------------- networks
 
 
-def running_norm(dim: int) -> Any:
+def running_norm(dim: int, window: int | None = None) -> Any:
     """A module ``x ↦ clip((x − mean) / sqrt(var + 1e-8), ±10)`` whose statistics are buffers.
 
     The statistics are pooled over every leading dimension (formations, time,
@@ -409,6 +423,11 @@ def running_norm(dim: int) -> Any:
     ``RunningMeanStd``), never in ``forward``: the trainer updates them after
     the PPO epochs on a batch, so a batch is trained with the statistics it
     was collected with. They are saved in the module's ``state_dict``.
+
+    With ``window`` (a count of rows, pooled as above) they forget: a batch of
+    ``b`` rows is merged with the statistics so far weighted as
+    ``min(count, max(window − b, 0))`` rows, so the count never exceeds
+    ``max(window, b)`` and the older rows' weight decays geometrically.
     """
     import torch
     from torch import nn
@@ -432,6 +451,8 @@ def running_norm(dim: int) -> Any:
             flat = x.reshape(-1, dim).double()
             n_new = flat.shape[0]
             mean_new, var_new = flat.mean(0), flat.var(0, unbiased=False)
+            if window is not None:
+                self.count.clamp_(max=max(window - n_new, 0))
             total = self.count + n_new
             delta = mean_new - self.mean.double()
             mean = self.mean.double() + delta * (n_new / total)
@@ -519,6 +540,7 @@ def _policy_network(
     scale: str = "state_dependent",
     action_scale: float | Sequence[float] = 1.0,
     inputs: str = "raw",
+    window: int | None = None,
 ) -> Any:
     """The shared actor: [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the distribution.
 
@@ -532,7 +554,8 @@ def _policy_network(
     TensorDict's ``AddStateIndependentNormalScale``).
     With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
     the Gaussian over the network's units becomes one over the env's (module docstring).
-    With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation.
+    With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation;
+    with ``normalize`` its running norm, forgetting after ``window`` rows (:func:`running_norm`).
     """
     import math
 
@@ -546,7 +569,7 @@ def _policy_network(
     if rescaled and distribution != "normal":
         raise ValueError(f"action_scale {action_scale!r} needs distribution 'normal' (tanh squashes before scaling)")
     net = nn.Sequential(
-        *_input_modules(obs_dim, normalize, inputs),
+        *_input_modules(obs_dim, normalize, inputs, window),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=action_dim if scale == "state_independent" else 2 * action_dim,
@@ -611,24 +634,31 @@ def _action_units(units: np.ndarray) -> Any:
     return ActionUnits()
 
 
-def _input_modules(obs_dim: int, normalize: bool, inputs: str) -> list[Any]:
-    """What a network puts before its MLP: the running norm, the fixed input map (``inputs: predicted``), or nothing."""
+def _input_modules(obs_dim: int, normalize: bool, inputs: str, window: int | None = None) -> list[Any]:
+    """What a network puts before its MLP: the running norm (forgetting after ``window`` rows), the fixed input map
+    (``inputs: predicted``), or nothing."""
     if inputs == "predicted":
         from training.inputs import PredictedInputs
 
         return [PredictedInputs()]
-    return [running_norm(obs_dim)] if normalize else []
+    return [running_norm(obs_dim, window)] if normalize else []
 
 
 def _critic_network(
-    obs_dim: int, n_agents: int, hidden: list[int], centralized: bool, normalize: bool, inputs: str = "raw"
+    obs_dim: int,
+    n_agents: int,
+    hidden: list[int],
+    centralized: bool,
+    normalize: bool,
+    inputs: str = "raw",
+    window: int | None = None,
 ) -> Any:
     from tensordict.nn import TensorDictModule
     from torch import nn
     from torchrl.modules import MultiAgentMLP
 
     net = nn.Sequential(
-        *_input_modules(obs_dim, normalize, inputs),
+        *_input_modules(obs_dim, normalize, inputs, window),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=1,
@@ -764,8 +794,9 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
     exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"], cfg["action_scale"]
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, cfg["inputs"])
-    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"])
+    window = cfg["normalize_window"]
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, cfg["inputs"], window)
+    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"], window)
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
     switch = cfg["train_reward_switch"]
