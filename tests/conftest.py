@@ -15,6 +15,20 @@ import os
 import pytest
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _sb3_logs_in_pytest_s_tmp(tmp_path_factory: pytest.TempPathFactory):
+    """SB3's ``learn`` without a log folder makes an empty ``SB3-<date>`` folder in the system's temp directory
+    (``stable_baselines3.common.logger.configure``) unless ``SB3_LOGDIR`` names one: the suite's go to pytest's
+    own temp directory, which pytest prunes, instead of piling up in /tmp."""
+    before = os.environ.get("SB3_LOGDIR")
+    os.environ["SB3_LOGDIR"] = str(tmp_path_factory.mktemp("sb3_logs"))
+    yield
+    if before is None:
+        os.environ.pop("SB3_LOGDIR", None)
+    else:
+        os.environ["SB3_LOGDIR"] = before
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if os.environ.get("MARINE_FORMATION_BACKEND") != "numpy":
         return

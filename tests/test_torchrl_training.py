@@ -156,6 +156,8 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
+        ("normalize_window=0", "normalize_window must be a whole number ≥ 1, got 0"),
+        ("normalize_window=1000", "normalize_window = 1000 needs normalize_observations: true"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
@@ -567,6 +569,35 @@ def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_
     assert norm(torch.full((1, 4), 1e6)).max() == 10.0  # clipped
 
 
+@pytest.mark.parametrize("window", [1, 150, 400, 2000, 10**9])
+def test_a_running_norm_with_a_window_is_the_weighted_mean_and_variance_of_the_rows_it_remembers(window):
+    """Truth: numpy's weighted mean and (population) variance of every row seen, each row's weight being the
+    product of the factors by which the docstring's rule shrank the statistics after it: before a batch of b rows,
+    what is remembered (total weight c) counts as min(c, max(window − b, 0)). The prior is the two points ±1 of
+    weight 5e-5 each, as above. A window of 1 keeps only the last batch; 10⁹ never forgets (the plain norm)."""
+    rng = np.random.default_rng(2)
+    norm = running_norm(3, window)
+    rows = [np.ones((1, 3)), -np.ones((1, 3))]
+    weights = [5e-5, 5e-5]
+    for size, shift in [(40, 0.0), (100, 50.0), (7, -3.0), (120, 9.0), (60, 2.0)]:
+        batch = (rng.normal(shift, [1.0, 4.0, 0.2], (size, 3)) + [0.0, 10.0, -1.0]).astype(np.float32)
+        remembered = sum(weights)
+        kept = min(remembered, max(window - size, 0)) / remembered
+        weights = [w * kept for w in weights] + [1.0] * size
+        rows.append(batch)
+        norm.update(torch.from_numpy(batch.reshape(size, 1, 3)))
+    every = np.concatenate(rows).astype(np.float64)
+    mean = np.average(every, axis=0, weights=weights)
+    var = np.average((every - mean) ** 2, axis=0, weights=weights)
+    np.testing.assert_allclose(norm.mean.numpy(), mean, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(norm.var.numpy(), var, rtol=1e-4)
+    assert float(norm.count) == pytest.approx(sum(weights), rel=1e-9)
+    if window == 1:  # only the last batch is left
+        np.testing.assert_allclose(norm.mean.numpy(), rows[-1].mean(0), rtol=1e-5, atol=1e-5)
+    first = sum(weights[:42]) / sum(weights)  # the prior and the first batch: 40 of 327 rows (12 %) when nothing is forgotten
+    assert first < 0.04 if window <= 150 else first == pytest.approx(40.0001 / 327.0001)
+
+
 def test_episode_returns_are_the_sums_of_each_vessel_s_rewards_between_done_flags():
     tracker = trainer.EpisodeReturns()
     reward = torch.arange(2 * 3 * 2, dtype=torch.float32).reshape(2, 3, 2, 1)  # 2 formations, 3 steps, 2 vessels
@@ -636,3 +667,25 @@ def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_li
     evaluate(["--policy", str(out), "--episodes", "2", "--seed", "10000", "--json", str(report), "--quiet"])
     mean = json.loads(report.read_text())["policies"][str(out)]["summary"]["return"]["mean"]
     assert mean == pytest.approx(json.loads((out / "evaluation.json").read_text())["learned_return"], rel=1e-9)
+
+
+def test_normalize_window_reaches_the_actor_s_and_the_critic_s_statistics(tmp_path, monkeypatch):
+    """Two batches of 40 formation-steps of 3 vessels, 120 rows each: with a window of 150 the first batch is
+    remembered as 30 rows when the second arrives, so both norms count 150 rows (240 without the window)."""
+    built = {}
+    make_critic = trainer._critic_network
+
+    def keep(*args, **kwargs):
+        built["critic"] = make_critic(*args, **kwargs)
+        return built["critic"]
+
+    monkeypatch.setattr(trainer, "_critic_network", keep)
+    out = tmp_path / "run"
+    args = ["--seed", "1", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    for item in [*TINY, "eval_episodes=1", "normalize_observations=true", "normalize_window=150"]:
+        args += ["--set", item]
+    assert main(args) == 0
+    policy, config = load_torch_policy(out)
+    assert config["normalize_window"] == 150
+    assert float(policy.trunk[0].count) == pytest.approx(150, abs=1e-3)
+    assert float(built["critic"].module[0].count) == pytest.approx(150, abs=1e-3)
