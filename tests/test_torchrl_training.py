@@ -580,7 +580,7 @@ def test_a_running_norm_with_a_window_is_the_weighted_mean_and_variance_of_the_r
     rows = [np.ones((1, 3)), -np.ones((1, 3))]
     weights = [5e-5, 5e-5]
     for size, shift in [(40, 0.0), (100, 50.0), (7, -3.0), (120, 9.0), (60, 2.0)]:
-        batch = (rng.normal(shift, [1.0, 4.0, 0.2], (size, 3)) + [0.0, 10.0, -1.0]).astype(np.float32)
+        batch = (rng.normal(shift, [1.0, 4.0, 0.2], (size, 3)) + np.array([0.0, 10.0, -1.0])).astype(np.float32)
         remembered = sum(weights)
         kept = min(remembered, max(window - size, 0)) / remembered
         weights = [w * kept for w in weights] + [1.0] * size
@@ -594,7 +594,8 @@ def test_a_running_norm_with_a_window_is_the_weighted_mean_and_variance_of_the_r
     assert float(norm.count) == pytest.approx(sum(weights), rel=1e-9)
     if window == 1:  # only the last batch is left
         np.testing.assert_allclose(norm.mean.numpy(), rows[-1].mean(0), rtol=1e-5, atol=1e-5)
-    first = sum(weights[:42]) / sum(weights)  # the prior and the first batch: 40 of 327 rows (12 %) when nothing is forgotten
+    # the prior and the first batch: 40 of 327 rows (12 %) when nothing is forgotten
+    first = sum(weights[:42]) / sum(weights)
     assert first < 0.04 if window <= 150 else first == pytest.approx(40.0001 / 327.0001)
 
 
@@ -633,6 +634,15 @@ def test_reward_scaler_divides_by_the_std_of_the_discounted_returns_it_has_seen(
     np.testing.assert_allclose(scaled.numpy(), np.clip(reward / std, -10, 10), rtol=1e-5)
 
 
+def _train_tiny(out, *items):
+    """Train TINY at the speed level (seed 1) with these ``--set`` items more; the reloaded policy and config."""
+    args = ["--seed", "1", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
+    for item in [*TINY, *items]:
+        args += ["--set", item]
+    assert main(args) == 0
+    return load_torch_policy(out)
+
+
 def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_like_the_trained_one(
     tmp_path, monkeypatch
 ):
@@ -645,11 +655,8 @@ def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_li
 
     monkeypatch.setattr(trainer, "_save", keep)
     out = tmp_path / "run"
-    args = ["--seed", "1", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    for item in [*TINY, "normalize_observations=true", "normalize_advantage=true", "normalize_reward=true"]:
-        args += ["--set", item]
-    assert main(args) == 0
-    policy, config = load_torch_policy(out)
+    normalized = ("normalize_observations=true", "normalize_advantage=true", "normalize_reward=true")
+    policy, config = _train_tiny(out, *normalized)
     assert config["normalize_observations"] and config["normalize_reward"]
     saved, loaded = trained["actor"].module[0].module[0], policy.trunk[0]
     assert float(saved.count) == pytest.approx(240, abs=1e-3)  # every vessel's observation of the 80 frames
@@ -680,12 +687,8 @@ def test_normalize_window_reaches_the_actor_s_and_the_critic_s_statistics(tmp_pa
         return built["critic"]
 
     monkeypatch.setattr(trainer, "_critic_network", keep)
-    out = tmp_path / "run"
-    args = ["--seed", "1", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    for item in [*TINY, "eval_episodes=1", "normalize_observations=true", "normalize_window=150"]:
-        args += ["--set", item]
-    assert main(args) == 0
-    policy, config = load_torch_policy(out)
+    windowed = ("eval_episodes=1", "normalize_observations=true", "normalize_window=150")
+    policy, config = _train_tiny(tmp_path / "run", *windowed)
     assert config["normalize_window"] == 150
     assert float(policy.trunk[0].count) == pytest.approx(150, abs=1e-3)
     assert float(built["critic"].module[0].count) == pytest.approx(150, abs=1e-3)
