@@ -10,10 +10,9 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from marine_formation_env.actions import action_space
-from marine_formation_env.core import FormationCore, StepOutput, reset_output
-from marine_formation_env.frontend import Rendering, one_entry, read_reset, resolve_config, vessel_infos
+from marine_formation_env.core import StepOutput, reset_output
+from marine_formation_env.frontend import Rendering, one_entry, open_front_end, read_reset, vessel_infos
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationParallelEnv", "parallel_env"]
@@ -299,11 +298,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         render_speedup: float = 1.0,
         **overrides: Any,
     ) -> None:
-        check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = resolve_config(scenario, overrides)
-        self.metadata = {**type(self).metadata, "render_fps": render_fps(self.config.dt, render_speedup)}
+        front = open_front_end(type(self).metadata, scenario, overrides, render_mode, render_speedup, backend)
+        self.config, self.metadata, self.core = front
         self.render_mode = render_mode
-        self.core = FormationCore(self.config, num_envs=1, backend=backend)
         n = self.config.n_vessels
         self.possible_agents = [f"vessel_{j}" for j in range(n)]
         self.agents: list[str] = []

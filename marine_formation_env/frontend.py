@@ -52,6 +52,7 @@ from gymnasium.utils import seeding
 
 from marine_formation_env.core import COLUMNS_HINT, REWARD_COMPONENTS, FormationCore, StepOutput
 from marine_formation_env.errors import check_seed, checked_array
+from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import (
     ScenarioConfig,
     initial_state_problem,
@@ -71,6 +72,7 @@ __all__ = [
     "formation_infos",
     "formation_seeds",
     "one_entry",
+    "open_front_end",
     "read_reset",
     "resolve_config",
     "reward_terms",
@@ -100,6 +102,31 @@ def resolve_config(scenario: str | ScenarioConfig, overrides: Mapping[str, Any])
             )
         return scenario
     return make_config(scenario, **overrides)
+
+
+def open_front_end(
+    metadata: Mapping[str, Any],
+    scenario: str | ScenarioConfig,
+    overrides: Mapping[str, Any],
+    render_mode: str | None,
+    render_speedup: float,
+    backend: str,
+    num_envs: int = 1,
+) -> tuple[ScenarioConfig, dict[str, Any], FormationCore]:
+    """What every front end's constructor does first: check ``render_mode`` against ``metadata["render_modes"]``,
+    resolve the configuration (:func:`resolve_config`), set ``render_fps`` for it (``render_speedup``), then build
+    the core. Returns the configuration, the instance's metadata (a copy of ``metadata`` with ``render_fps``) and
+    the core.
+
+    Raises:
+        ValueError: unknown render mode.
+        ConfigError: unknown scenario or override, or ``render_speedup`` not a finite number > 0.
+        TypeError: overrides given together with a ready configuration.
+    """
+    check_render_mode(render_mode, metadata["render_modes"])
+    config = resolve_config(scenario, overrides)
+    instance_metadata = {**metadata, "render_fps": render_fps(config.dt, render_speedup)}
+    return config, instance_metadata, FormationCore(config, num_envs=num_envs, backend=backend)
 
 
 def check_reset_options(options: Any) -> dict[str, Any]:

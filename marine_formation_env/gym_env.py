@@ -32,18 +32,17 @@ import gymnasium as gym
 import numpy as np
 
 from marine_formation_env.actions import action_space
-from marine_formation_env.core import FormationCore, StepOutput, reset_output
+from marine_formation_env.core import StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import (
     Rendering,
     formation_infos,
     one_entry,
+    open_front_end,
     read_reset,
-    resolve_config,
     vessel_mean,
 )
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
 __all__ = ["MarineFormationGymEnv"]
@@ -69,10 +68,8 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         render_speedup: float = 1.0,
         **overrides: Any,
     ) -> None:
-        check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = resolve_config(scenario, overrides)
-        self.metadata = {**type(self).metadata, "render_fps": render_fps(self.config.dt, render_speedup)}
-        self.core = FormationCore(self.config, num_envs=1, backend=backend)
+        front = open_front_end(type(self).metadata, scenario, overrides, render_mode, render_speedup, backend)
+        self.config, self.metadata, self.core = front
         self.render_mode = render_mode
         self.observation_space = observation_space(self.config, joint=True)
         self.action_space = action_space(self.config, joint=True)

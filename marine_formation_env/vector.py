@@ -47,19 +47,18 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from marine_formation_env.actions import action_space
-from marine_formation_env.core import FormationCore, StepOutput, reset_output
+from marine_formation_env.core import StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import (
     InitialStates,
     Rendering,
     formation_infos,
+    open_front_end,
     read_reset,
-    resolve_config,
     vessel_infos,
     vessel_mean,
 )
 from marine_formation_env.observations import observation_space
-from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["LAYOUTS", "MarineFormationVectorEnv"]
@@ -103,18 +102,13 @@ class MarineFormationVectorEnv(VectorEnv):
         mode = AutoresetMode(autoreset_mode)
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be NEXT_STEP or SAME_STEP, got {mode!r}")
-        check_render_mode(render_mode, self.metadata["render_modes"])
-        self.config: ScenarioConfig = resolve_config(scenario, overrides)
-        self.core = FormationCore(self.config, num_envs=num_envs, backend=backend)
+        metadata = {**type(self).metadata, "autoreset_mode": mode}
+        front = open_front_end(metadata, scenario, overrides, render_mode, render_speedup, backend, num_envs)
+        self.config, self.metadata, self.core = front
         self.num_formations = self.core.num_envs
         self.n_vessels = self.config.n_vessels
         self.layout = layout
         self.autoreset_mode = mode
-        self.metadata = {
-            **type(self).metadata,
-            "autoreset_mode": mode,
-            "render_fps": render_fps(self.config.dt, render_speedup),
-        }
         self.render_mode = render_mode
         b, joint = self.num_formations, layout == "joint"
         self.num_envs = b if joint else b * self.n_vessels
