@@ -131,6 +131,8 @@ class MLPPolicy(BatchPolicy):
         features: the weights of :func:`slot_features` (a ``slots`` network: any number of slots), or None.
         inputs: ``raw``, or ``predicted``: the network reads :func:`predicted_inputs` of the observation (before
             the normalization above; ``training.torchrl_ppo``'s ``inputs: predicted``).
+        input_mask: ``(observation_dim,)`` of 0 and 1 multiplying the observation before everything else (0: an
+            entry the network does not read; ``training.torchrl_ppo``'s ``drop_inputs``), or None.
     """
 
     def __init__(
@@ -144,6 +146,7 @@ class MLPPolicy(BatchPolicy):
         action_dim: int,
         features: dict[str, np.ndarray] | None = None,
         inputs: str = "raw",
+        input_mask: np.ndarray | None = None,
     ) -> None:
         if squash not in SQUASHES:
             raise ValueError(f"squash must be one of {list(SQUASHES)}, got {squash!r}")
@@ -159,6 +162,13 @@ class MLPPolicy(BatchPolicy):
         self.features = None if features is None else _checked_features(features)
         #: the observation length it takes (None: any 10 + 4·slots, a ``slots`` network)
         self.observation_dim: int | None = int(self.weights[0].shape[0]) if features is None else None
+        self.input_mask = None if input_mask is None else np.asarray(input_mask, dtype=np.float64)
+        if self.input_mask is not None and (
+            self.input_mask.shape != (self.observation_dim,) or not np.all(np.isin(self.input_mask, (0.0, 1.0)))
+        ):
+            raise ValueError(
+                f"input_mask must be {self.observation_dim} zeros and ones (an MLP's inputs), got {input_mask!r}"
+            )
         self.action_dim = int(action_dim)
         #: the header of the file it was loaded from (:func:`load_pretrained`), else None
         self.info: PretrainedInfo | None = None
@@ -167,6 +177,8 @@ class MLPPolicy(BatchPolicy):
         obs = np.asarray(obs, dtype=np.float64)
         if self.observation_dim is not None and obs.shape[-1] != self.observation_dim:
             raise ValueError(f"observations of size {obs.shape[-1]} given, this policy takes {self.observation_dim}")
+        if self.input_mask is not None:
+            obs = obs * self.input_mask
         if self.inputs == "predicted":
             obs = predicted_inputs(obs)
         x = np.clip((obs - self.mean) / self.std, -self.clip, self.clip)
@@ -185,6 +197,8 @@ class MLPPolicy(BatchPolicy):
         out = {"mean": self.mean, "std": self.std, "clip": np.array(self.clip), "squash": np.array(self.squash)}
         if self.inputs != "raw":  # files of raw-input policies stay as they were
             out["inputs"] = np.array(self.inputs)
+        if self.input_mask is not None:  # and files of policies that read every entry
+            out["input_mask"] = self.input_mask
         for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             out[f"w{k}"], out[f"b{k}"] = w, b
         for name, value in (self.features or {}).items():
@@ -205,6 +219,7 @@ class MLPPolicy(BatchPolicy):
             action_dim,
             features or None,
             str(arrays["inputs"]) if "inputs" in arrays else "raw",
+            arrays.get("input_mask"),
         )
 
 
@@ -450,12 +465,16 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     """The deterministic network of a ``training.torchrl_ppo`` run (running norm, shared MLP, tanh) as an MLPPolicy."""
     from torch import nn
 
+    from training.inputs import InputMask
     from training.torchrl_ppo import load_torch_policy
 
     policy, config = load_torch_policy(run)
     trunk = policy.trunk
     dim = policy.observation_dim
     inputs = str(config.get("inputs", "raw"))
+    input_mask = None
+    if isinstance(trunk[0], InputMask):  # drop_inputs: the mask first, then the network as without it
+        input_mask, trunk = trunk[0].mask.double().numpy(), trunk[1:]
     if len(trunk) == 2 and inputs == "raw":  # a running norm, then the MLP
         norm = trunk[0]
         mean = norm.mean.double().numpy()
@@ -479,7 +498,9 @@ def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     weights[-1][:, : policy.action_dim] *= units
     biases[-1][: policy.action_dim] *= units
     squash = "tanh" if policy.distribution == "tanh_normal" else "clip"
-    return MLPPolicy(weights, biases, mean, std, clip, squash, policy.action_dim, inputs=inputs), config
+    return MLPPolicy(
+        weights, biases, mean, std, clip, squash, policy.action_dim, inputs=inputs, input_mask=input_mask
+    ), config
 
 
 def export_run(

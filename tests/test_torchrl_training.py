@@ -157,6 +157,9 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
         ("normalize_window=0", "normalize_window must be a whole number ≥ 1, got 0"),
+        ("drop_inputs=age", "drop_inputs must be a list of observation entry names, got 'age'"),
+        ("drop_inputs=['speed']", "drop_inputs must name distinct entries of ['cross_track_error'"),
+        ("drop_inputs=['age', 'age']", "(repeated)"),
         ("normalize_window=1000", "normalize_window = 1000 needs normalize_observations: true"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
@@ -692,3 +695,10 @@ def test_normalize_window_reaches_the_actor_s_and_the_critic_s_statistics(tmp_pa
     assert config["normalize_window"] == 150
     assert float(policy.trunk[0].count) == pytest.approx(150, abs=1e-3)
     assert float(built["critic"].module[0].count) == pytest.approx(150, abs=1e-3)
+
+
+def test_drop_inputs_and_predicted_inputs_are_refused_together(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["--out", str(tmp_path / "x"), "--set", "drop_inputs=['age']", "--set", "inputs=predicted"])
+    assert stop.value.code == 2
+    assert "drop_inputs applies to raw inputs; inputs: predicted maps them first" in capsys.readouterr().err

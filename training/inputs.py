@@ -16,17 +16,51 @@ A vessel's observation is its own part (``OWN_SIZE`` entries) and one
 observation's layout, for an MLP (``training.torchrl_ppo``'s ``inputs:
 predicted``); ``baselines.pretrained.predicted_inputs`` is its numpy twin, so
 an exported policy runs without torch.
+
+:class:`InputMask` zeroes chosen entries of every observation
+(:func:`dropped_mask`; ``training.torchrl_ppo``'s ``drop_inputs``), so a
+network cannot read them; ``baselines.pretrained.MLPPolicy``'s ``input_mask``
+is its numpy twin.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
+import numpy as np
 import torch
 from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
+from marine_formation_env.rules import (
+    CURVATURE,
+    LANE_OFFSET,
+    OWN_FEATURES,
+    OWN_SIZE,
+    SLOT_FEATURES,
+    SLOT_SIZE,
+    slot_count,
+)
 
-__all__ = ["PredictedInputs", "predicted_inputs"]
+__all__ = ["InputMask", "PredictedInputs", "dropped_mask", "predicted_inputs"]
+
+#: The names ``dropped_mask`` takes: an own entry, or a slot entry (dropped from every slot).
+DROPPABLE = (*OWN_FEATURES, *SLOT_FEATURES)
+
+
+def dropped_mask(dim: int, names: Sequence[str]) -> np.ndarray:
+    """``(dim,)`` float32: 0 at the entries ``names`` (own entries, or slot entries in every slot), 1 elsewhere.
+
+    Raises:
+        ValueError: a name that is neither in ``OWN_FEATURES`` nor in ``SLOT_FEATURES`` (named), or ``dim`` not
+            ``OWN_SIZE + SLOT_SIZE · K``.
+    """
+    unknown = [name for name in names if name not in DROPPABLE]
+    if unknown:
+        raise ValueError(f"unknown observation entries {unknown}; choose from {list(DROPPABLE)}")
+    own = np.array([name not in names for name in OWN_FEATURES], dtype=np.float32)
+    slot = np.array([name not in names for name in SLOT_FEATURES], dtype=np.float32)
+    return np.concatenate([own, np.tile(slot, slot_count(dim))])
 
 
 def predicted_inputs(
@@ -67,3 +101,16 @@ class PredictedInputs(nn.Module):
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
         return torch.cat([own, slots.flatten(-2)], dim=-1)
+
+
+class InputMask(nn.Module):
+    """``x ↦ x · mask`` with ``mask = dropped_mask(dim, names)`` a buffer (saved with the network, never trained)."""
+
+    mask: torch.Tensor
+
+    def __init__(self, dim: int, names: Sequence[str]) -> None:
+        super().__init__()
+        self.register_buffer("mask", torch.from_numpy(dropped_mask(dim, names)))
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        return observations * self.mask

@@ -40,6 +40,7 @@ nest; unknown keys and bad values are refused by name):
 | ``temporal_smoothness`` | λ ≥ 0 of CAPS' temporal term on the policy's mean (below); 0: PPO itself | 0.0 |
 | ``temporal_smoothness_pairs`` | formation-step pairs of the term per minibatch (null: ``minibatch_size``) | null |
 | ``inputs`` | ``raw``, or ``predicted``: the networks read the slot network's fixed input map (below) | ``raw`` |
+| ``drop_inputs`` | observation entries the policy does not read (names; below) | ``[]`` |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
 | ``normalize_window`` | vessel-observations the observation statistics remember (below), or null: all | null |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
@@ -96,6 +97,22 @@ its inputs by itself. It replaces ``normalize_observations`` (both together
 are refused). The saved policy and its numpy export
 (``baselines.pretrained.MLPPolicy`` with ``inputs="predicted"``) apply the
 same map.
+
+``drop_inputs`` (names of ``OWN_FEATURES`` and ``SLOT_FEATURES``, the
+latter dropped from every slot) zeroes those entries of the actor's input
+(:class:`training.inputs.InputMask`, before the running norm); the critic
+still reads everything. ``[lane_offset, linked, age]`` makes a vessel's
+command a function of its errors and the speed profile alone: where every
+error is zero, every vessel commands the same whoever it hears and whatever
+its lane, as the paper's law does (a vessel that hears no one is a vessel
+whose neighbours agree). An MLP that reads the link bits and the lane offset
+can learn a different command at zero error for each vessel, which the
+formation then holds as steady coordination and cross-track offsets
+(docs/results.md, ``paper_force``). On lossy links the link bit and the age
+say how fresh a slot is; on a curved path the lane offset sets each lane's
+speed: drop them only where those do not matter. The saved policy and its
+numpy export (``baselines.pretrained.MLPPolicy``'s ``input_mask``) apply
+the same mask.
 
 ``train_reward`` shapes the reward the learner trains on, nothing else: the
 training env's reward is the scenario's with these fields replaced (for
@@ -252,6 +269,7 @@ DEFAULTS: dict[str, Any] = {
     "temporal_smoothness": 0.0,
     "temporal_smoothness_pairs": None,
     "inputs": "raw",
+    "drop_inputs": [],
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
@@ -311,6 +329,9 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
             "inputs: predicted divides by fixed scales; normalize_observations: true would normalize again"
             " (set one of them)"
         )
+    cfg["drop_inputs"] = _dropped(cfg["drop_inputs"])
+    if cfg["drop_inputs"] and cfg["inputs"] == "predicted":
+        raise TrainConfigError("drop_inputs applies to raw inputs; inputs: predicted maps them first (set one of them)")
     if cfg["scale"] not in SCALES:
         raise TrainConfigError(f"scale must be one of {list(SCALES)}, got {cfg['scale']!r}")
     if cfg["distribution"] not in DISTRIBUTIONS:
@@ -363,6 +384,21 @@ def learner_env_kwargs(cfg: dict[str, Any]) -> dict[str, Any]:
     if cfg["train_dt"] is not None:
         kwargs["dt"] = cfg["train_dt"]
     return kwargs
+
+
+def _dropped(value: Any) -> list[str]:
+    """``drop_inputs`` checked: a list of distinct names of observation entries."""
+    from training.inputs import DROPPABLE
+
+    if not isinstance(value, list) or not all(isinstance(name, str) for name in value):
+        raise TrainConfigError(f"drop_inputs must be a list of observation entry names, got {value!r}")
+    unknown = [name for name in value if name not in DROPPABLE]
+    if unknown or len(set(value)) != len(value):
+        raise TrainConfigError(
+            f"drop_inputs must name distinct entries of {list(DROPPABLE)}, got {value!r}"
+            + (f" (unknown: {unknown})" if unknown else " (repeated)")
+        )
+    return value
 
 
 def _check_reward_switch(cfg: dict[str, Any]) -> dict[str, Any] | None:
@@ -541,6 +577,7 @@ def _policy_network(
     action_scale: float | Sequence[float] = 1.0,
     inputs: str = "raw",
     window: int | None = None,
+    dropped: Sequence[str] = (),
 ) -> Any:
     """The shared actor: [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the distribution.
 
@@ -555,7 +592,8 @@ def _policy_network(
     With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
     the Gaussian over the network's units becomes one over the env's (module docstring).
     With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation;
-    with ``normalize`` its running norm, forgetting after ``window`` rows (:func:`running_norm`).
+    with ``normalize`` its running norm, forgetting after ``window`` rows (:func:`running_norm`); with ``dropped``
+    an :class:`training.inputs.InputMask` of those entries first.
     """
     import math
 
@@ -568,7 +606,10 @@ def _policy_network(
     rescaled = not np.all(units == 1.0)
     if rescaled and distribution != "normal":
         raise ValueError(f"action_scale {action_scale!r} needs distribution 'normal' (tanh squashes before scaling)")
+    if dropped:
+        from training.inputs import InputMask
     net = nn.Sequential(
+        *([InputMask(obs_dim, dropped)] if dropped else []),
         *_input_modules(obs_dim, normalize, inputs, window),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
@@ -740,12 +781,29 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         # runs saved before these keys trained with their defaults
         initial, kind = float(config.get("initial_scale", 1.0)), str(config.get("scale", "state_dependent"))
         units, inputs = config.get("action_scale", 1.0), str(config.get("inputs", "raw"))
-        sizes = int(dims["observation"]), int(dims["action"])
-        actor = _policy_network(*sizes, 1, hidden, normalize, distribution, initial, None, kind, units, inputs)
+        sizes, dropped = (int(dims["observation"]), int(dims["action"])), list(config.get("drop_inputs", []))
+        actor = _policy_network(
+            *sizes, 1, hidden, normalize, distribution, initial, None, kind, units, inputs, None, dropped
+        )
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
         raise ValueError(f"cannot load the policy {str(path)!r}: {type(err).__name__}: {err}") from err
     return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution, units), config
+
+
+def _update_norm(net: Any, observations: Any) -> None:
+    """Merge a batch into the running norm of a network's ``nn.Sequential``, as the modules before it (an input
+    mask) hand it on."""
+    import torch
+
+    seen = observations
+    with torch.no_grad():
+        for module in net:
+            if hasattr(module, "update"):
+                module.update(seen)
+                return
+            seen = module(seen)
+    raise ValueError(f"no running norm in {[type(module).__name__ for module in net]}")
 
 
 def _shared_trunk(actor: Any) -> Any:
@@ -795,7 +853,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     episodes = EpisodeReturns()
     exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"], cfg["action_scale"]
     window = cfg["normalize_window"]
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, cfg["inputs"], window)
+    inputs = cfg["inputs"], window, cfg["drop_inputs"]
+    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, *inputs)
     critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"], window)
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
@@ -859,7 +918,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         smoothness = term.mean_distance if term is not None else ""
         if normalize:  # after the epochs: each batch trains with the statistics it was collected with
             for net in (actor.module[0].module, critic.module):
-                net[0].update(data.get(("vessel", "observation")))
+                _update_norm(net, data.get(("vessel", "observation")))
         collector.update_policy_weights_()
         frames += data.numel()
         elapsed = time.perf_counter() - begin
