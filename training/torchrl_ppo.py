@@ -579,7 +579,8 @@ def _policy_network(
     window: int | None = None,
     dropped: Sequence[str] = (),
 ) -> Any:
-    """The shared actor: [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the distribution.
+    """The shared actor: [input mask →] [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the
+    distribution.
 
     The scale is a biased softplus of the network's output, equal to ``initial_scale`` where that output is 0
     (TorchRL's ``biased_softplus``), so a freshly initialized policy explores with about that deviation.
@@ -807,8 +808,9 @@ def _update_norm(net: Any, observations: Any) -> None:
 
 
 def _shared_trunk(actor: Any) -> Any:
-    """The observation → network-output part of an actor built by :func:`_policy_network`: its running norm
-    (if any) and its ``MultiAgentMLP``, without the ``NormalParamExtractor`` (and the action units, if any)."""
+    """The observation → network-output part of an actor built by :func:`_policy_network`: its input mask and
+    running norm (each if any) and its ``MultiAgentMLP``, without the ``NormalParamExtractor`` (and the action
+    units, if any)."""
     return _shared_trunk_of(actor.module[0].module)
 
 
