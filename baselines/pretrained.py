@@ -30,7 +30,9 @@ Two network kinds:
     ``training.torchrl_ppo``'s running norm folded in; ``squash`` is ``clip``
     (SB3's deterministic action, the Gaussian's mean clipped to the action
     space) or ``tanh`` (TorchRL's tanh-squashed Gaussian's mode). It exists
-    for one team size.
+    for one team size. A file may add ``inputs`` (a fixed input map first:
+    :func:`predicted_inputs`) or ``input_mask`` (entries the network does not
+    read, zeroed first: ``training.torchrl_ppo``'s ``drop_inputs``).
 ``slots``
     the same, after a graph network over the observation's slots
     (:func:`slot_features`, ``training.slot_policy``): it takes any number

@@ -42,7 +42,7 @@ from marine_formation_env.rules import (
     slot_count,
 )
 
-__all__ = ["InputMask", "PredictedInputs", "dropped_mask", "predicted_inputs"]
+__all__ = ["DROPPABLE", "InputMask", "PredictedInputs", "dropped_mask", "predicted_inputs"]
 
 #: The names ``dropped_mask`` takes: an own entry, or a slot entry (dropped from every slot).
 DROPPABLE = (*OWN_FEATURES, *SLOT_FEATURES)
