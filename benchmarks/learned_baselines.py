@@ -537,6 +537,9 @@ def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     period = run.get("train_dt")
     if period is not None:
         text += f", deciding every {float(period):g} s in training"
+    dropped = run.get("drop_inputs")
+    if dropped:
+        text += ", not reading " + ", ".join(dropped)
     smoothness = run.get("temporal_smoothness")
     if smoothness:
         text += f", with a temporal smoothness term λ={float(smoothness):g}"

@@ -182,6 +182,11 @@ def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypat
     assert "shaped reward (sigma_cross_track=5.0)" in text and text.endswith("deciding every 0.5 s in training")
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_dt: null\n")
     assert "deciding" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
+    (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_dt: 1.0\ndrop_inputs: [lane_offset, linked, age]\n")
+    text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
+    assert text.endswith("deciding every 1 s in training, not reading lane_offset, linked, age")
+    (tmp_path / "config.yaml").write_text("algo: mappo\ndrop_inputs: []\n")
+    assert "reading" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
     switch = "train_reward_switch: {after: 0.35, reward: {fine_share: 0.3, fine_terms: [coordination]}}"
     (tmp_path / "config.yaml").write_text(f"algo: mappo\n{switch}\n")
     text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
