@@ -165,6 +165,8 @@ class MLPPolicy(BatchPolicy):
         #: the observation length it takes (None: any 10 + 4·slots, a ``slots`` network)
         self.observation_dim: int | None = int(self.weights[0].shape[0]) if features is None else None
         self.input_mask = None if input_mask is None else np.asarray(input_mask, dtype=np.float64)
+        if self.input_mask is not None and self.observation_dim is None:
+            raise ValueError("input_mask applies to an MLP of one observation size, not to a slots network")
         if self.input_mask is not None and (
             self.input_mask.shape != (self.observation_dim,) or not np.all(np.isin(self.input_mask, (0.0, 1.0)))
         ):

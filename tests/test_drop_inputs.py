@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.pretrained import MLPPolicy, export_run, load_pretrained
+from baselines.pretrained import SLOT_WEIGHTS, MLPPolicy, export_run, load_pretrained
 from marine_formation_env.rules import OWN_FEATURES, OWN_SIZE, SLOT_FEATURES, SLOT_SIZE
 
 torch = pytest.importorskip("torch")
@@ -51,6 +51,9 @@ def test_an_mlp_policy_s_input_mask_is_checked_and_kept_in_its_file():
     for bad in (np.ones(dim - 1), np.full(dim, 0.5)):
         with pytest.raises(ValueError, match=f"input_mask must be {dim} zeros and ones"):
             MLPPolicy(weights, biases, np.zeros(dim), np.ones(dim), np.inf, "clip", 2, input_mask=bad)
+    features = {name: np.zeros((1, 1)) for name in SLOT_WEIGHTS}  # any slots network: it takes any size
+    with pytest.raises(ValueError, match="input_mask applies to an MLP of one observation size, not to a slots"):
+        MLPPolicy(weights, biases, np.zeros(dim), np.ones(dim), np.inf, "clip", 2, features, input_mask=mask)
 
 
 @pytest.fixture(scope="module")
