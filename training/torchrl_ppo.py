@@ -784,7 +784,7 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         units, inputs = config.get("action_scale", 1.0), str(config.get("inputs", "raw"))
         sizes, dropped = (int(dims["observation"]), int(dims["action"])), list(config.get("drop_inputs", []))
         actor = _policy_network(
-            *sizes, 1, hidden, normalize, distribution, initial, None, kind, units, inputs, None, dropped
+            *sizes, 1, hidden, normalize, distribution, initial, None, kind, units, inputs, dropped=dropped
         )
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
