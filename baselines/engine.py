@@ -31,11 +31,12 @@ import numpy as np
 
 from baselines.metrics import episode_metrics
 from baselines.rollout import Trajectory
+from marine_formation_env.env import MarineFormationParallelEnv
 from marine_formation_env.frontend import reward_terms
 from marine_formation_env.scenarios import ScenarioConfig
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-__all__ = ["episode_reports", "evaluate_episodes"]
+__all__ = ["episode_reports", "evaluate_episodes", "run_episode"]
 
 
 def evaluate_episodes(
@@ -158,3 +159,24 @@ def _rollout(
             )
         )
     return out
+
+
+def run_episode(
+    env: MarineFormationParallelEnv,
+    policy: Any,
+    seed: int | None = None,
+    options: dict[str, Any] | None = None,
+) -> Trajectory:
+    """Roll out one episode of ``policy`` on ``env``'s scenario and record it.
+
+    The episode is the one ``env.reset(seed=seed, options=options)`` starts;
+    it runs on the evaluation engine (:func:`evaluate_episodes`,
+    one formation, ``env``'s backend), which leaves ``env`` itself untouched.
+
+    Args:
+        env: a ParallelEnv of this package (its configuration and backend are used).
+        policy: has ``act(observations)`` or ``act_batch``; optionally
+            ``commands`` and ``reset()`` (see :mod:`baselines.engine`).
+        seed, options: the reset seed and options.
+    """
+    return evaluate_episodes(policy, env.config, [seed], options=options, backend=env.core.backend)[0]

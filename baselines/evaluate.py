@@ -51,8 +51,11 @@ import numpy as np
 
 from baselines.engine import episode_reports
 from baselines.metrics import summarize
+from baselines.plots import plot_comparison, plot_episode
+from baselines.pretrained import check_compatible, format_listing, list_pretrained, load_pretrained
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy, Trajectory
+from baselines.runs import load_run
 from marine_formation_env.atomic import atomic_path, atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
@@ -104,14 +107,8 @@ def is_model_path(spec: str) -> bool:
 
 
 def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
-    """Load a saved model and its run config (needs the ``train`` extra)."""
-    try:
-        from training.learned import load_learned_policy
-    except ImportError as err:
-        raise ImportError(
-            f"evaluating a saved model needs the training extra: pip install 'marine-formation-env[train]' ({err})"
-        ) from err
-    return load_learned_policy(spec)  # type: ignore[no-any-return]
+    """Load a saved model and its run config (:func:`baselines.runs.load_run`; needs the trainer's extra)."""
+    return load_run(spec)
 
 
 def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
@@ -124,8 +121,6 @@ def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = 
         policy = loaded[spec]
         obs_dim = env.observation_space(env.possible_agents[0]).shape[0]
         if is_pretrained(spec):
-            from baselines.pretrained import check_compatible
-
             check_compatible(policy.info, env.config, obs_dim)
             return policy
         expected, actions = policy.observation_dim, policy.action_dim
@@ -185,8 +180,6 @@ def evaluate(
     trained_on: dict[str, Any] = {}
     for spec in policies:
         if is_pretrained(spec):
-            from baselines.pretrained import load_pretrained
-
             loaded[spec], info = load_pretrained(spec[len(PRETRAINED_PREFIX) :])
             if not trained_on:
                 trained_on = {"scenario": info.scenario, **info.env_kwargs}
@@ -287,8 +280,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no table")
     args = parser.parse_args(argv)
     if args.list_pretrained:
-        from baselines.pretrained import format_listing, list_pretrained
-
         print(format_listing(list_pretrained()))
         return 0
     policies = args.policies or ["reference"]
@@ -312,8 +303,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         with atomic_path(args.save_trajectory) as tmp:
             np.savez_compressed(tmp, **arrays)  # type: ignore[arg-type]
     if args.plot:
-        from baselines.plots import plot_comparison, plot_episode
-
         if len(first) == 1:
             (label, traj), *_ = first.items()
             plot_episode(

@@ -38,16 +38,14 @@ Two network kinds:
     (:func:`slot_features`, ``training.slot_policy``): it takes any number
     of slots, so any team size.
 
-Files are written by :func:`export_run` (from an SB3 ``training.train`` run or
-a ``training.torchrl_ppo`` run), atomically; ``python -m baselines.pretrained
-export RUN --name NAME`` does it from the shell.
+Files are written atomically by :func:`save_pretrained`; ``training.export``
+makes one from a run folder (``python -m training.export RUN --name NAME``).
 """
 
 from __future__ import annotations
 
 import io
 import json
-import sys
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -60,7 +58,8 @@ from baselines.reference import predicted_coordination_error
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
-from marine_formation_env.rules import CURVATURE, DESIRED_SPEED, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, SURGE, slot_count
+from marine_formation_env.cli import ArgumentParser
+from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -69,7 +68,6 @@ __all__ = [
     "MLPPolicy",
     "PretrainedInfo",
     "check_compatible",
-    "export_run",
     "list_pretrained",
     "load_pretrained",
     "save_pretrained",
@@ -278,8 +276,8 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
 
 #: The arrays every :func:`slot_features` weights dict holds,
 SLOT_WEIGHTS = ("message_w0", "message_b0", "message_w1", "message_b1", "own_w0", "own_b0")
-#: and those an option adds (``SlotFeatures(speed_error=s)``, ``SlotFeatures(zero_at_agreement=True)``).
-SLOT_OPTIONS = ("speed_error_scale", "zero_at_agreement")
+#: and the one an option adds (``SlotFeatures(zero_at_agreement=True)``).
+SLOT_OPTIONS = ("zero_at_agreement",)
 
 
 def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -289,9 +287,6 @@ def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     unknown = [k for k in out if k not in SLOT_WEIGHTS + SLOT_OPTIONS]
     if missing or unknown:
         raise ValueError(f"slot network weights: missing {missing}, unknown {unknown}")
-    scale = out.get("speed_error_scale")
-    if scale is not None and not (scale.shape == () and 0 < float(scale) < np.inf):
-        raise ValueError(f"slot network weights: speed_error_scale must be one number > 0, got {scale!r}")
     if "zero_at_agreement" in out and not (out["zero_at_agreement"].shape == () and out["zero_at_agreement"] == 1.0):
         raise ValueError(
             f"slot network weights: zero_at_agreement must be 1 if present, got {out['zero_at_agreement']!r}"
@@ -309,15 +304,10 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
     """``training.slot_policy.SlotFeatures`` in numpy (float64); ``weights``: ``{name: array}``, layers ``x @ w + b``.
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
-    ``speed_error_scale`` ``s`` [m/s] if the network reads its own speed error ``tanh((u − u_d)/s)`` as one more
-    own input (``SlotFeatures(speed_error=s)``), and ``zero_at_agreement`` (1) if each message is measured from
-    that of a neighbour with Δθ = Δẋ = 0 (``SlotFeatures(zero_at_agreement=True)``).
+    ``zero_at_agreement`` (1) if each message is measured from that of a neighbour with Δθ = Δẋ = 0
+    (``SlotFeatures(zero_at_agreement=True)``).
     """
     own, slots = _own_and_slots(obs)
-    if "speed_error_scale" in weights:
-        obs = np.asarray(obs, dtype=np.float64)
-        error = np.tanh((obs[..., SURGE] - obs[..., DESIRED_SPEED]) / weights["speed_error_scale"])
-        own = np.concatenate([own, error[..., None]], axis=-1)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
     messages = _message(np.concatenate([own_k, slots], axis=-1), weights)
@@ -408,167 +398,6 @@ def check_compatible(info: PretrainedInfo, config: ScenarioConfig, observation_d
         )
 
 
-# ----------------------------------------------------------------------------- export
-
-
-def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
-    """The deterministic network of an SB3 ``training.train`` run (MlpPolicy, tanh) as an :class:`MLPPolicy`."""
-    from torch import nn
-
-    from training.learned import load_learned_policy
-
-    policy, config = load_learned_policy(run)
-    model = policy.model
-    net = model.policy
-    if getattr(getattr(net, "mlp_extractor", None), "policy_net", None) is None or not hasattr(net, "action_net"):
-        raise ValueError(f"{run}: not an actor-critic MlpPolicy ({type(net).__name__})")
-    features = _sb3_slot_features(net)
-    layers = [m for m in net.mlp_extractor.policy_net if isinstance(m, nn.Linear)] + [net.action_net]
-    activations = {type(m) for m in net.mlp_extractor.policy_net if not isinstance(m, nn.Linear)}
-    if activations - {nn.Tanh}:
-        raise ValueError(f"{run}: only tanh networks can be exported, found {sorted(a.__name__ for a in activations)}")
-    dim = policy.observation_dim
-    if policy.normalizer is not None and policy.normalizer.norm_obs:
-        if features is not None:
-            raise ValueError(f"{run}: a slot network must read raw observations (normalize: {{norm_obs: false}})")
-        rms = policy.normalizer.obs_rms
-        mean, std = rms.mean, np.sqrt(rms.var + policy.normalizer.epsilon)
-        clip = float(policy.normalizer.clip_obs)
-    elif features is not None:
-        mean, std, clip = np.zeros(()), np.ones(()), np.inf  # any length
-    else:
-        mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
-    weights = [m.weight.detach().double().numpy().T.copy() for m in layers]
-    biases = [m.bias.detach().double().numpy().copy() for m in layers]
-    return MLPPolicy(weights, biases, mean, std, clip, "clip", policy.action_dim, features), config
-
-
-def _sb3_slot_features(net: Any) -> dict[str, np.ndarray] | None:
-    """The weights of an SB3 policy's (actor's) ``SlotFeatures`` extractor; None for SB3's weightless flatten one."""
-    extractor = net.features_extractor
-    if type(extractor).__name__ != "SlotFeatures":
-        if any(True for _ in extractor.parameters()):
-            raise ValueError(f"cannot export a {type(extractor).__name__} features extractor")
-        return None
-
-    def linear(module: Any) -> tuple[np.ndarray, np.ndarray]:
-        return module.weight.detach().double().numpy().T.copy(), module.bias.detach().double().numpy().copy()
-
-    out: dict[str, np.ndarray] = {}
-    out["message_w0"], out["message_b0"] = linear(extractor.message[0])
-    out["message_w1"], out["message_b1"] = linear(extractor.message[2])
-    out["own_w0"], out["own_b0"] = linear(extractor.own[0])
-    if extractor.speed_error is not None:
-        out["speed_error_scale"] = np.array(extractor.speed_error)
-    if extractor.zero_at_agreement:
-        out["zero_at_agreement"] = np.array(1.0)
-    return out
-
-
-def _torchrl_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
-    """The deterministic network of a ``training.torchrl_ppo`` run (running norm, shared MLP, tanh) as an MLPPolicy."""
-    from torch import nn
-
-    from training.inputs import InputMask
-    from training.torchrl_ppo import load_torch_policy
-
-    policy, config = load_torch_policy(run)
-    trunk = policy.trunk
-    dim = policy.observation_dim
-    inputs = str(config.get("inputs", "raw"))
-    input_mask = None
-    if isinstance(trunk[0], InputMask):  # drop_inputs: the mask first, then the network as without it
-        input_mask, trunk = trunk[0].mask.double().numpy(), trunk[1:]
-    if len(trunk) == 2 and inputs == "raw":  # a running norm, then the MLP
-        norm = trunk[0]
-        mean = norm.mean.double().numpy()
-        std = np.sqrt(norm.var.double().numpy() + 1e-8)
-        clip = 10.0
-    else:  # the MLP alone, or the fixed input map (MLPPolicy's inputs="predicted") and the MLP
-        mean, std, clip = np.zeros(dim), np.ones(dim), np.inf
-    mlp = trunk[-1]
-    # a MultiAgentMLP with shared parameters keeps them in ``params`` (keys "0", "2", ...: the Linear layers'
-    # indices in its empty template network, tanh between them)
-    template = mlp._empty_net
-    others = {type(m) for m in template if not isinstance(m, nn.Linear)}
-    if others - {nn.Tanh}:
-        raise ValueError(f"{run}: only tanh networks can be exported, found {sorted(a.__name__ for a in others)}")
-    indices = [str(k) for k, m in enumerate(template) if isinstance(m, nn.Linear)]
-    params = mlp.params
-    weights = [params[k, "weight"].detach().double().numpy().T.copy() for k in indices]
-    biases = [params[k, "bias"].detach().double().numpy().copy() for k in indices]
-    # the action units (action_scale) multiply the means, the last layer's first A outputs: fold them in
-    units = policy.action_scale.astype(np.float64)
-    weights[-1][:, : policy.action_dim] *= units
-    biases[-1][: policy.action_dim] *= units
-    squash = "tanh" if policy.distribution == "tanh_normal" else "clip"
-    return MLPPolicy(
-        weights, biases, mean, std, clip, squash, policy.action_dim, inputs=inputs, input_mask=input_mask
-    ), config
-
-
-def export_run(
-    run: str | Path,
-    name: str,
-    description: str = "",
-    folder: Path | None = None,
-    training: dict[str, Any] | None = None,
-    evaluation: dict[str, Any] | None = None,
-    episodes: int = 10,
-) -> Path:
-    """Export the policy of a run folder (SB3 ``training.train`` or ``training.torchrl_ppo``) as ``NAME.npz``.
-
-    The header takes the scenario, env overrides and team size from the run's
-    config; ``training`` and ``evaluation`` add what the caller knows. Without
-    an ``evaluation`` the run's ``evaluation.json`` is read, and if it has no
-    per-episode returns (an SB3 run), the trained network (the library's, not
-    the numpy copy) and the reference are run on ``episodes`` seeds (10 000 +)
-    of its training scenario: every header says what its policy scored.
-    """
-    run = Path(run)
-    if not name.replace("_", "").isalnum():
-        raise ValueError(f"a pretrained policy's name is letters, digits and underscores, got {name!r}")
-    if (run / "policy.pt").is_file():
-        policy, config = _torchrl_network(run)
-        pipeline = "torchrl"
-    else:
-        policy, config = _sb3_network(run)
-        pipeline = "sb3"
-    from marine_formation_env.scenarios import make_config
-
-    scenario, env_kwargs = config["scenario"], dict(config["env_kwargs"])
-    cfg = make_config(scenario, **env_kwargs)
-    measured = dict(evaluation or {})
-    summary = (run if run.is_dir() else run.parent) / "evaluation.json"
-    if not measured and summary.is_file():
-        measured = json.loads(summary.read_text())
-    if "learned_returns" not in measured:  # an SB3 run has no closing evaluation: measure the trained network
-        measured = _measure(run, episodes)
-    info = PretrainedInfo(
-        name=name,
-        scenario=scenario,
-        env_kwargs=json.loads(json.dumps(env_kwargs)),
-        action_level=cfg.action_level,
-        n_vessels=None if policy.features is not None else cfg.n_vessels,
-        observation_dim=policy.observation_dim,
-        action_dim=policy.action_dim,
-        kind="mlp" if policy.features is None else "slots",
-        description=description,
-        training={"pipeline": pipeline, "seed": config.get("seed"), **(training or {})},
-        evaluation=measured,
-    )
-    return save_pretrained(policy, info, folder)
-
-
-def _measure(run: Path, episodes: int) -> dict[str, Any]:
-    """The run's policy and the reference on ``episodes`` seeds (10 000 +) of its scenario, as ``evaluate_run``."""
-    from training.learned import evaluation_summary, load_learned_policy
-
-    policy, config = load_learned_policy(run)
-    seeds = [10_000 + k for k in range(episodes)]
-    return {"seeds": seeds, **evaluation_summary(policy, config["scenario"], config["env_kwargs"], seeds)}
-
-
 # ----------------------------------------------------------------------------- command line
 
 
@@ -600,26 +429,9 @@ def format_listing(infos: Sequence[PretrainedInfo]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    from marine_formation_env.cli import ArgumentParser
-
-    parser = ArgumentParser(prog="python -m baselines.pretrained", description="List or export pretrained policies.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="list the shipped policies")
-    export = sub.add_parser("export", help="export a run folder's policy as baselines/pretrained/NAME.npz")
-    export.add_argument("run", type=Path, help="a training.train or training.torchrl_ppo run folder")
-    export.add_argument("--name", required=True)
-    export.add_argument("--description", default="")
-    export.add_argument("--folder", type=Path, default=None, help="where to write (default: the shipped folder)")
-    args = parser.parse_args(argv)
-    if args.command == "list":
-        print(format_listing(list_pretrained()))
-        return 0
-    try:
-        path = export_run(args.run, args.name, args.description, args.folder)
-    except (ValueError, FileNotFoundError) as err:
-        print(f"python -m baselines.pretrained: error: {err}", file=sys.stderr)
-        return 2
-    print(path)
+    parser = ArgumentParser(prog="python -m baselines.pretrained", description="List the shipped pretrained policies.")
+    parser.parse_args(argv)
+    print(format_listing(list_pretrained()))
     return 0
 
 

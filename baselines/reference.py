@@ -40,7 +40,7 @@ Two options go beyond the paper (our extensions, off by default):
   ``los_integral_gain`` makes it integral LOS. At ``force`` the ILOS angle
   replaces ψ_LOS in (14); its feed-forward omits the integrator's slow
   contribution σ·ė_int. The integrators are state: call :meth:`reset` at
-  every episode start (:func:`~baselines.rollout.run_episode` does).
+  every episode start (:func:`~baselines.engine.run_episode` does).
 """
 
 from __future__ import annotations
@@ -62,6 +62,17 @@ from marine_formation_env.control import (
     turn_crab,
 )
 from marine_formation_env.observations import ObservationLayout
+from marine_formation_env.rules import (
+    AGE,
+    COORDINATION,
+    CROSS_TRACK,
+    CURVATURE,
+    HEADING,
+    LANE_OFFSET,
+    SURGE,
+    SWAY,
+    VELOCITY,
+)
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["ReferencePolicy", "predicted_coordination_error"]
@@ -75,9 +86,9 @@ def predicted_coordination_error(own: np.ndarray, slots: np.ndarray) -> np.ndarr
     ``ẋ_j = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``; exact while i's speed holds, unchanged at age 0 (an
     ideal link). Returns ``(..., K)``.
     """
-    e, psi, u, v, kappa, d_y = (own[..., k] for k in (0, 1, 2, 3, 7, 9))
+    e, psi, u, v, kappa, d_y = (own[..., k] for k in (CROSS_TRACK, HEADING, SURGE, SWAY, CURVATURE, LANE_OFFSET))
     x_dot_own = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (d_y + e))
-    return np.asarray(slots[..., 1] - (x_dot_own[..., None] - slots[..., 2]) * slots[..., 3])
+    return np.asarray(slots[..., COORDINATION] - (x_dot_own[..., None] - slots[..., VELOCITY]) * slots[..., AGE])
 
 
 class ReferencePolicy(BatchPolicy):

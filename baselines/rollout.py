@@ -4,8 +4,8 @@ A *policy* is any object with ``act(observations) -> actions`` over the
 PettingZoo dicts; a :class:`BatchPolicy` also acts on stacked observations
 (``act_batch``), which lets the evaluation engine (:mod:`baselines.engine`)
 run many episodes at once. :class:`Trajectory` is what an episode leaves:
-states, commands, actions and rewards as arrays. :func:`run_episode` records
-one episode (through the engine).
+states, commands, actions and rewards as arrays
+(:func:`baselines.engine.run_episode` records one).
 """
 
 from __future__ import annotations
@@ -16,13 +16,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from marine_formation_env.env import MarineFormationParallelEnv
-
-__all__ = ["BatchPolicy", "Policy", "RandomPolicy", "Trajectory", "run_episode"]
+__all__ = ["BatchPolicy", "Policy", "RandomPolicy", "Trajectory"]
 
 
 class Policy(Protocol):
-    """What :func:`run_episode` needs of a policy."""
+    """What the evaluation engine (:mod:`baselines.engine`) needs of a policy."""
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]: ...
 
@@ -97,26 +95,3 @@ class RandomPolicy(BatchPolicy):
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Actions ``(..., A)`` drawn uniformly for observations ``(..., dim)``."""
         return self.rng.uniform(-1.0, 1.0, (*np.shape(obs)[:-1], self.action_dim)).astype(np.float32)
-
-
-def run_episode(
-    env: MarineFormationParallelEnv,
-    policy: Any,
-    seed: int | None = None,
-    options: dict[str, Any] | None = None,
-) -> Trajectory:
-    """Roll out one episode of ``policy`` on ``env``'s scenario and record it.
-
-    The episode is the one ``env.reset(seed=seed, options=options)`` starts;
-    it runs on the evaluation engine (:func:`baselines.engine.evaluate_episodes`,
-    one formation, ``env``'s backend), which leaves ``env`` itself untouched.
-
-    Args:
-        env: a ParallelEnv of this package (its configuration and backend are used).
-        policy: has ``act(observations)`` or ``act_batch``; optionally
-            ``commands`` and ``reset()`` (see :mod:`baselines.engine`).
-        seed, options: the reset seed and options.
-    """
-    from baselines.engine import evaluate_episodes
-
-    return evaluate_episodes(policy, env.config, [seed], options=options, backend=env.core.backend)[0]

@@ -35,9 +35,11 @@ import numpy as np
 from baselines.engine import episode_reports
 from baselines.evaluate import is_reference, make_policy, progress_bar
 from baselines.plots import save_figure
+from baselines.ray_cluster import connect
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
+from marine_formation_env.render import require_matplotlib
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 
 __all__ = ["METRICS", "main", "run_cell", "sweep"]
@@ -165,8 +167,6 @@ def _run_on_ray(
     per_cell: int,
 ) -> list[dict[str, dict[str, Any]]]:
     """The cells as Ray tasks (one CPU each) on the cluster at ``address``; results in grid order."""
-    from training.ray_cluster import connect
-
     ray = connect(address)
     task = ray.remote(num_cpus=1)(run_cell)
     pending = {task.remote(*job, list(policies), seeds): i for i, job in enumerate(jobs)}
@@ -207,8 +207,6 @@ def format_markdown(report: dict[str, Any]) -> str:
 
 def plot_sweep(report: dict[str, Any], path: str | Path) -> Any:
     """Heat maps: one row per policy, one column per metric (loss p down, latency across)."""
-    from marine_formation_env.render import require_matplotlib
-
     require_matplotlib()
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure

@@ -68,6 +68,7 @@ which can be older than the publishing commit.
 
 from __future__ import annotations
 
+import csv
 import json
 import os
 import platform
@@ -81,10 +82,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
+from baselines.engine import episode_reports
+from baselines.plots import plot_comparison
+from baselines.pretrained import load_pretrained
+from baselines.reference import ReferencePolicy
 from benchmarks.training_throughput import parse_seeds
-from marine_formation_env.atomic import atomic_write_text
+from marine_formation_env import ENV_ID
+from marine_formation_env.atomic import atomic_path, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least
+from marine_formation_env.env import parallel_env
+from marine_formation_env.scenarios import make_config
+from training.export import export_run
+from training.learned import load_learned_policy, member_metrics
 
 __all__ = ["ROWS", "Row", "format_table", "main", "row_summary", "run_row_seed"]
 
@@ -153,18 +164,12 @@ def _train_command(row: Row, seed: int, minutes: float, folder: Path) -> list[st
 
 
 def _scenario_of(folder: Path) -> tuple[str, dict[str, Any]]:
-    from training.learned import load_learned_policy
-
     _, config = load_learned_policy(folder)
     return config["scenario"], dict(config["env_kwargs"])
 
 
 def _run_config(folder: Path) -> dict[str, Any]:
     """The run's ``config.yaml`` (``{}`` if it has none)."""
-    import yaml
-
-    from marine_formation_env import ENV_ID
-
     path = folder / "config.yaml"
     if not path.is_file():
         return {}
@@ -185,14 +190,10 @@ def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict
     A row with ``generalization`` settings runs its policy (exported as a numpy network, which takes any
     number of slots) on each of them instead; ``learned`` and ``reference`` are then the means over them.
     """
-    from marine_formation_env.env import parallel_env
-    from training.learned import load_learned_policy
-
     policy, config = load_learned_policy(folder)
     if row is None or not row.generalization:
         env = parallel_env(config["scenario"], **config["env_kwargs"])
         return _evaluate_members(policy, env, episodes)
-    from baselines.pretrained import export_run, load_pretrained
 
     export_run(folder, row.name, row.note, folder / "exported")
     portable, _ = load_pretrained(row.name, folder / "exported")
@@ -212,9 +213,6 @@ def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict
 
 
 def _evaluate_members(policy: Any, env: Any, episodes: int) -> dict[str, Any]:
-    from baselines.reference import ReferencePolicy
-    from training.learned import member_metrics
-
     seeds = [EVAL_SEED + k for k in range(episodes)]
     policies: dict[str, Any] = {"learned": policy, "reference": ReferencePolicy(env)}
     if not env.config.ideal_observations:
@@ -355,8 +353,6 @@ def format_table(summaries: list[dict[str, Any]], budgets: dict[str, float]) -> 
 
 def _curve(folder: Path) -> tuple[np.ndarray, np.ndarray]:
     """(minutes, training episode return) of a run folder's ``progress.csv`` (rows without episodes dropped)."""
-    import csv
-
     path = folder / "progress.csv"
     if not path.is_file():
         return np.zeros(0), np.zeros(0)
@@ -421,18 +417,10 @@ def plot_episode(row: Row, record: dict[str, Any], out: Path, path: Path) -> Non
     A generalization row shows its largest team on its first graph (20 vessels on a ring), run by the exported
     numpy network.
     """
-    from baselines.engine import episode_reports
-    from baselines.plots import plot_comparison
-    from baselines.reference import ReferencePolicy
-    from marine_formation_env.env import parallel_env
-    from training.learned import load_learned_policy
-
     folder = out / row.name / f"seed_{record['seed']}"
     policy, config = load_learned_policy(folder)
     env = parallel_env(config["scenario"], **config["env_kwargs"])
     if row.generalization:
-        from baselines.pretrained import load_pretrained
-
         policy, _ = load_pretrained(row.name, folder / "exported")
         n, topology = max(row.generalization, key=lambda pair: pair[0])
         base = {k: v for k, v in config["env_kwargs"].items() if k not in TEAM_KEYS}
@@ -445,8 +433,6 @@ def plot_episode(row: Row, record: dict[str, Any], out: Path, path: Path) -> Non
 
 
 def _save_figure(fig: Any, path: Path) -> None:
-    from marine_formation_env.atomic import atomic_path
-
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=path.suffix.lstrip("."))
@@ -520,8 +506,6 @@ def publish_markdown(table: str, provenance: str, document: Path) -> None:
 
 def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     """A pretrained policy's one-line description: its setting, how it was trained, which seed."""
-    from marine_formation_env.scenarios import make_config
-
     scenario, env_kwargs = _scenario_of(folder)
     learner = "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO"
     level = make_config(scenario, **env_kwargs).action_level  # the scenario's own level when the run set none
@@ -604,8 +588,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if first is not None:
             plot_episode(row, first, args.out, args.out / "episodes" / f"{row.name}.png")
     if args.publish:
-        from baselines.pretrained import export_run
-
         docs = DOCS
         provenance = _provenance(_commit(), records, report["command"])  # records: this call's rows only
         publish_markdown(table, provenance, docs / "results.md")
@@ -649,10 +631,6 @@ def _header_evaluation(row: Row, record: dict[str, Any], folder: Path, episodes:
     shipped-policy test re-measures) and lists each setting's mean return and success besides.
     """
     if row.generalization:
-        from baselines.pretrained import load_pretrained
-        from marine_formation_env.env import parallel_env
-        from training.learned import load_learned_policy
-
         _, config = load_learned_policy(folder)
         portable, _ = load_pretrained(row.name, folder / "exported")
         own = _evaluate_members(portable, parallel_env(config["scenario"], **config["env_kwargs"]), episodes)

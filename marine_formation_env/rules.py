@@ -27,9 +27,11 @@ import numpy as np
 __all__ = [
     "AGE",
     "COORDINATION",
+    "CROSS_TRACK",
     "CURVATURE",
     "CURVATURE_AHEAD",
     "DESIRED_SPEED",
+    "HEADING",
     "LANE_OFFSET",
     "LINK",
     "LOOKAHEAD",
@@ -38,6 +40,7 @@ __all__ = [
     "SLOT_FEATURES",
     "SLOT_SIZE",
     "SURGE",
+    "SWAY",
     "VELOCITY",
     "along_track",
     "bounded_cost",
@@ -68,15 +71,23 @@ OWN_FEATURES = (
 SLOT_FEATURES = ("linked", "coordination_error", "velocity_difference", "age")
 OWN_SIZE = len(OWN_FEATURES)
 SLOT_SIZE = len(SLOT_FEATURES)
-#: Offsets inside the own part: the surge speed u and the desired speed u_d.
-SURGE, DESIRED_SPEED = OWN_FEATURES.index("surge"), OWN_FEATURES.index("desired_speed")
+#: Offsets inside the own part: the cross-track error e, the heading error ψ̃, the surge u and sway v speeds.
+CROSS_TRACK, HEADING, SURGE, SWAY = (
+    OWN_FEATURES.index(name) for name in ("cross_track_error", "heading", "surge", "sway")
+)
+#: Offset inside the own part of the desired speed u_d.
+DESIRED_SPEED = OWN_FEATURES.index("desired_speed")
 #: Offsets inside the own part: the path's curvature at the vessel's projection, at
 #: :data:`LOOKAHEAD` further along the path, and the vessel's lane offset D_y.
-CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = 7, 8, 9
+CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = (
+    OWN_FEATURES.index(name) for name in ("path_curvature", "path_curvature_ahead", "lane_offset")
+)
 #: How far ahead [m] of its projection a vessel sees the path's curvature (20 s at 5 m/s).
 LOOKAHEAD = 100.0
 #: Offsets inside a slot.
-LINK, COORDINATION, VELOCITY, AGE = 0, 1, 2, 3
+LINK, COORDINATION, VELOCITY, AGE = (
+    SLOT_FEATURES.index(name) for name in ("linked", "coordination_error", "velocity_difference", "age")
+)
 
 
 def slot_count(dim: int) -> int:

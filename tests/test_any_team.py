@@ -22,8 +22,6 @@ from baselines.pretrained import (
     OWN_SCALE,
     SLOT_SCALE,
     MLPPolicy,
-    _sb3_slot_features,
-    export_run,
     load_pretrained,
     slot_features,
 )
@@ -39,6 +37,7 @@ from marine_formation_env.rules import (
 )
 from training import train as train_module
 from training.config import TrainConfigError, load_config, team_overrides, validate
+from training.export import _sb3_slot_features, export_run
 from training.learned import load_learned_policy
 from training.slot_policy import SlotFeatures
 from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv

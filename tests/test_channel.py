@@ -413,8 +413,8 @@ def test_extrapolation_recovers_the_current_difference_for_constant_velocities()
 def test_reference_under_radio_converges_with_extrapolation():
     """Documented bounds (docs/results.md): extrapolating reference under `radio` settles; final errors < 1 cm."""
     env = marine_formation_env.parallel_env("radio")
+    from baselines.engine import run_episode
     from baselines.metrics import episode_metrics
-    from baselines.rollout import run_episode
 
     for seed in range(3):
         m = episode_metrics(run_episode(env, ReferencePolicy(env, extrapolate=True), seed=seed), env.config)

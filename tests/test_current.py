@@ -28,8 +28,8 @@ from scipy.optimize import brentq
 
 import marine_formation_env
 from baselines import ReferencePolicy
+from baselines.engine import run_episode
 from baselines.metrics import episode_metrics
-from baselines.rollout import run_episode
 from marine_formation_env.core import FormationCore
 from marine_formation_env.scenarios import ConfigError, make_config
 from tests.independent_model import model_rhs

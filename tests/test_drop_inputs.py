@@ -12,12 +12,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from baselines.pretrained import SLOT_WEIGHTS, MLPPolicy, export_run, load_pretrained
+from baselines.pretrained import SLOT_WEIGHTS, MLPPolicy, load_pretrained
 from marine_formation_env.rules import OWN_FEATURES, OWN_SIZE, SLOT_FEATURES, SLOT_SIZE
 
 torch = pytest.importorskip("torch")
 pytest.importorskip("torchrl")
 
+from training.export import export_run  # noqa: E402
 from training.inputs import InputMask, dropped_mask  # noqa: E402
 from training.torchrl_ppo import load_torch_policy  # noqa: E402
 from training.torchrl_ppo import main as torchrl_main  # noqa: E402

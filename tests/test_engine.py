@@ -16,9 +16,9 @@ import pytest
 
 import marine_formation_env
 from baselines import ReferencePolicy
-from baselines.engine import episode_reports, evaluate_episodes
+from baselines.engine import episode_reports, evaluate_episodes, run_episode
 from baselines.metrics import episode_metrics
-from baselines.rollout import RandomPolicy, run_episode
+from baselines.rollout import RandomPolicy
 
 
 def parallel_loop(env, policy, seed):

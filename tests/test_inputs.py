@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from baselines.pretrained import OWN_SCALE, SLOT_SCALE, MLPPolicy, export_run, load_pretrained, predicted_inputs
+from baselines.pretrained import OWN_SCALE, SLOT_SCALE, MLPPolicy, load_pretrained, predicted_inputs
 from marine_formation_env import parallel_env
 from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
 
@@ -86,6 +86,7 @@ def test_a_policy_file_keeps_what_its_network_reads():
 
 def test_an_exported_run_with_predicted_inputs_acts_as_its_torchrl_policy(tmp_path):
     pytest.importorskip("torchrl")
+    from training.export import export_run
     from training.inputs import PredictedInputs
     from training.torchrl_ppo import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main

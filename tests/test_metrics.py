@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from baselines.engine import run_episode
 from baselines.metrics import action_change, action_change_by_entry, episode_metrics
-from baselines.rollout import BatchPolicy, run_episode
+from baselines.rollout import BatchPolicy
 from marine_formation_env.env import parallel_env
 
 

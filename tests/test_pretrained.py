@@ -24,7 +24,6 @@ from baselines.pretrained import (
     MLPPolicy,
     PretrainedInfo,
     check_compatible,
-    export_run,
     list_pretrained,
     load_pretrained,
     save_pretrained,
@@ -152,6 +151,7 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
     import torch
 
     from training import train as train_module
+    from training.export import export_run
     from training.learned import load_learned_policy
 
     torch.set_num_threads(1)
@@ -187,6 +187,7 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
 )
 def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path, distribution, scale, action_scale):
     pytest.importorskip("torchrl")
+    from training.export import export_run
     from training.torchrl_ppo import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main
 

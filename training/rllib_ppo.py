@@ -13,7 +13,7 @@ constraints-ecosystem.txt -e ".[rllib]"``)::
 
 ``--address`` joins a running Ray cluster (``HOST:PORT``, or ``auto`` on a
 node of it); without it a Ray instance of this process is started and stopped
-with it. Starting a cluster (:mod:`training.ray_cluster`)::
+with it. Starting a cluster (:mod:`baselines.ray_cluster`)::
 
     ray start --head --port=6379                 # on the head node
     ray start --address=HEAD_IP:6379             # on every other node
@@ -243,7 +243,7 @@ def load_rllib_policy(folder: str | Path) -> tuple[RLlibPolicy, dict[str, Any]]:
     try:
         from ray.rllib.core.rl_module.rl_module import RLModule
     except ImportError:
-        from training.ray_cluster import RAY_MISSING
+        from baselines.ray_cluster import RAY_MISSING
 
         raise ImportError(RAY_MISSING) from None
     try:
@@ -275,8 +275,8 @@ def train(cfg: dict[str, Any], out: Path, address: str | None = None, progress: 
     """Train with the resolved ``cfg`` into ``out``; returns the evaluation summary (also in ``evaluation.json``)."""
     from tqdm import tqdm
 
+    from baselines.ray_cluster import connect
     from marine_formation_env.scenarios import make_config
-    from training.ray_cluster import connect
 
     ray = connect(address or "local")
     n = make_config(cfg["scenario"], **cfg["env_kwargs"]).n_vessels

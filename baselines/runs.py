@@ -1,0 +1,117 @@
+"""Load a trained policy from a run folder, whichever trainer wrote it.
+
+Every trainer writes a run folder with a ``config.yaml`` whose top-level
+``trainer`` field names it (``sb3``, ``torchrl``, ``rllib``). The loader of
+each trainer is registered as a Python entry point in the group
+:data:`TRAINER_GROUP` (the ``training`` package registers its three in
+``pyproject.toml``), so this module finds a run's loader by that field
+without importing any trainer: ``baselines`` stays free of torch, and a
+third-party trainer can register its own.
+
+A loader is called as ``loader(path, deterministic=True)`` with the path the
+user named (the run folder, or a policy or checkpoint file in it) and returns
+``(policy, config)``: a :class:`~baselines.rollout.BatchPolicy` and the run's
+resolved configuration (``scenario`` and ``env_kwargs`` say what it trained on).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+__all__ = ["TRAINER_GROUP", "RunFolderError", "load_run", "run_folder_of", "trainer_of", "trainers"]
+
+#: The entry-point group of the run-folder loaders, one per ``trainer`` name.
+TRAINER_GROUP = "marine_formation_env.trainers"
+
+Loader = Callable[..., tuple[Any, dict[str, Any]]]
+
+
+class RunFolderError(ValueError):
+    """A run folder that cannot be loaded (no ``config.yaml``, no ``trainer`` field, an unknown trainer)."""
+
+
+def run_folder_of(path: str | Path) -> Path:
+    """The run folder of ``path``: the nearest of ``path`` and its parents that holds a ``config.yaml``.
+
+    ``runs/NAME``, ``runs/NAME/model.zip`` and ``runs/NAME/checkpoints/step_1000.zip``
+    all give ``runs/NAME``.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        RunFolderError: neither ``path`` nor its two parents hold a ``config.yaml``.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no run folder or policy file at {str(path)!r}")
+    folder = path if path.is_dir() else path.parent
+    for candidate in (folder, folder.parent):
+        if (candidate / "config.yaml").is_file():
+            return candidate
+    raise RunFolderError(f"{str(path)!r} is not in a run folder: no config.yaml in {str(folder)!r} or its parent")
+
+
+def trainer_of(folder: str | Path) -> str:
+    """The ``trainer`` field of a run folder's ``config.yaml``.
+
+    Raises:
+        RunFolderError: the file is not YAML, not a mapping, or has no string ``trainer`` field.
+    """
+    try:
+        import yaml  # the training extras' dependency: a run folder exists only where one is installed
+    except ImportError as err:
+        raise ImportError(
+            f"a run folder's config needs PyYAML: pip install 'marine-formation-env[train]' ({err})"
+        ) from err
+    config_path = Path(folder) / "config.yaml"
+    try:
+        config = yaml.safe_load(config_path.read_text())
+    except yaml.YAMLError as err:
+        raise RunFolderError(f"{config_path} is not YAML ({err})") from None
+    trainer = config.get("trainer") if isinstance(config, dict) else None
+    if not isinstance(trainer, str):
+        raise RunFolderError(
+            f"{config_path} has no 'trainer' field (one of {sorted(trainers())}): was it written by a trainer "
+            "of this package?"
+        )
+    return trainer
+
+
+def trainers() -> dict[str, Any]:
+    """The registered run-folder loaders: ``{trainer name: entry point}`` (not yet imported)."""
+    return {ep.name: ep for ep in entry_points(group=TRAINER_GROUP)}
+
+
+def load_run(path: str | Path, deterministic: bool = True) -> tuple[Any, dict[str, Any]]:
+    """Load the policy of a run folder (or of a policy file in one) and the run's resolved config.
+
+    Args:
+        path: the run folder, or its policy or a checkpoint file.
+        deterministic: act with the policy's mode (mean action) rather than sampling.
+
+    Returns:
+        ``(policy, config)`` as the trainer's loader gives them.
+
+    Raises:
+        FileNotFoundError: ``path`` does not exist.
+        RunFolderError: no run folder, no ``trainer`` field, or a trainer with no registered loader.
+        ImportError: the trainer's extra is not installed (the message names it).
+    """
+    folder = run_folder_of(path)
+    trainer = trainer_of(folder)
+    registered = trainers()
+    if trainer not in registered:
+        raise RunFolderError(
+            f"{folder / 'config.yaml'} names trainer {trainer!r}, which has no loader; registered: "
+            f"{sorted(registered)} (is the package installed, pip install -e .?)"
+        )
+    try:
+        loader: Loader = registered[trainer].load()
+    except ImportError as err:
+        raise ImportError(
+            f"loading a {trainer!r} run needs its extra: pip install 'marine-formation-env[train]' "
+            f"(sb3), '[torchrl]' or '[rllib]' ({err})"
+        ) from err
+    return loader(Path(path), deterministic=deterministic)
