@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from baselines.engine import evaluate_episodes
+from baselines.reference import ReferencePolicy
 from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.actions import LEVEL_COMMANDS
 from marine_formation_env.atomic import atomic_write_text
@@ -97,9 +99,6 @@ def reference_actions(scenario: str, level: str, seeds: list[int], after: float)
     of ``action_dim``), ``max``, ``p99`` and ``median`` of |a| over every vessel and control period, and
     ``max_after``: the largest |a| after ``after`` seconds. The actions are those the env applied (clipped).
     """
-    from baselines.engine import evaluate_episodes
-    from baselines.reference import ReferencePolicy
-
     config = make_config(scenario, action_level=level)
     if not 0.0 <= after < config.horizon:
         raise ValueError(f"after must lie in [0, horizon = {config.horizon:g}) s, got {after!r}")

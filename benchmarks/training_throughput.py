@@ -62,6 +62,8 @@ from typing import Any
 
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least
+from training.config import load_config
+from training.learned import evaluate_run, load_learned_policy
 
 __all__ = ["PIPELINES", "TARGET_RATIO", "format_runs", "format_table", "main", "parse_seeds", "summarize"]
 
@@ -109,9 +111,6 @@ def _isolated(command: list[str]) -> list[str]:
 
 def _sb3_evaluation(folder: Path, episodes: int) -> dict[str, Any]:
     """SB3's run folder through the common evaluation (``benchmarks.learning`` has its own seeds)."""
-    from training.config import load_config
-    from training.learned import evaluate_run, load_learned_policy
-
     bench = json.loads((folder / "benchmark.json").read_text())
     policy, _ = load_learned_policy(folder / "model.zip")
     raw = load_config(CONFIGS / "paper_speed_ppo.yaml")
