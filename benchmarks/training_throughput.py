@@ -26,7 +26,7 @@ machine's load falls on every pipeline alike). The table reports, per
 pipeline over its seeds, the mean, the sample standard deviation and the
 min–max of vessel-steps/s (each vessel's transition counts once) and of the
 mean evaluation return (≤ 0; the reference's is the yardstick), the ratio of
-the mean rate to SB3's, and whether issue 12's target holds (≥ 5× SB3's
+the mean rate to SB3's, and whether the throughput target holds (≥ 5× SB3's
 mean vessel-steps/s and a mean return ≥ SB3's); a second table lists every
 run::
 
@@ -68,7 +68,7 @@ from training.learned import evaluate_run, load_learned_policy
 __all__ = ["PIPELINES", "TARGET_RATIO", "format_runs", "format_table", "main", "parse_seeds", "summarize"]
 
 PIPELINES = ("sb3", "torchrl", "benchmarl", "rllib")
-#: Issue 12's target: this many times SB3's vessel-steps/s, at a mean return at least SB3's.
+#: The throughput target: this many times SB3's vessel-steps/s, at a mean return at least SB3's.
 TARGET_RATIO = 5.0
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "training" / "configs"
