@@ -17,7 +17,7 @@ pytestmark = pytest.mark.backend_independent
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("marine_formation_env", "baselines", "training")
 CODE = sorted(p for package in PACKAGES for p in (ROOT / package).rglob("*.py"))
-USER_FACING = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *CODE]
+USER_FACING = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")), *CODE]
 
 
 def readme_command(heading: str) -> str:
@@ -47,6 +47,7 @@ def test_no_reference_to_files_users_do_not_have(path):
 def test_every_docs_page_is_on_the_site():
     """Every page is in the navigation, except the tables the sweep script writes (excluded from the site)."""
     config = (ROOT / "mkdocs.yml").read_text()
-    for page in (ROOT / "docs").glob("*.md"):
+    for page in (ROOT / "docs").rglob("*.md"):
         generated = page.name.startswith("sweep_") and "sweep_*.md" in config
-        assert generated or f": {page.name}" in config, page.name
+        name = page.relative_to(ROOT / "docs").as_posix()
+        assert generated or f": {name}" in config, name
