@@ -1,6 +1,6 @@
-"""What the README's first screen promises, checked against the files it comes from.
+"""What the README's first screen (and the site's home page, which mirrors it) promises.
 
-The learned-baselines table of the README agrees with ``docs/learned_baselines.json``
+The learned-baselines table of each agrees with ``docs/learned_baselines.json``
 (which holds the published table of ``docs/results.md``, with each row's provenance);
 the code example runs and prints the return it claims; the citation files parse.
 """
@@ -21,6 +21,7 @@ pytestmark = pytest.mark.backend_independent
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+FIRST_SCREENS = [README, ROOT / "docs" / "index.md"]
 RESULTS = ROOT / "docs" / "learned_baselines.json"
 PAPER_TITLE = "Formation Control of Underactuated Marine Vehicles with Communication Constraints"
 
@@ -42,8 +43,8 @@ def markdown_table(text: str, header_start: str) -> list[dict[str, str]]:
     return rows
 
 
-def readme_learned_table() -> dict[str, dict[str, str]]:
-    rows = markdown_table(README.read_text(), "| row | level | learner |")
+def learned_table(page: Path) -> dict[str, dict[str, str]]:
+    rows = markdown_table(page.read_text(), "| row | level | learner |")
     return {row["row"].strip("`"): row for row in rows}
 
 
@@ -54,13 +55,19 @@ def leading_value(cell: str) -> str:
     return match.group(0)
 
 
-def test_readme_learned_table_has_every_published_row_and_no_other():
-    assert set(readme_learned_table()) == {row["row"] for row in published_rows()}
+def page_id(page: Path) -> str:
+    return str(page.relative_to(ROOT))
 
 
+@pytest.mark.parametrize("page", FIRST_SCREENS, ids=page_id)
+def test_learned_table_has_every_published_row_and_no_other(page):
+    assert set(learned_table(page)) == {row["row"] for row in published_rows()}
+
+
+@pytest.mark.parametrize("page", FIRST_SCREENS, ids=page_id)
 @pytest.mark.parametrize("row", published_rows(), ids=lambda row: row["row"])
-def test_readme_learned_numbers_are_the_published_ones(row):
-    cells = readme_learned_table()[row["row"]]
+def test_learned_numbers_are_the_published_ones(row, page):
+    cells = learned_table(page)[row["row"]]
     assert leading_value(cells["R_ref / R_learned"]) == row["performance"]["text"]
     assert leading_value(cells["success"]) == row["success_learned"]["text"]
     assert cells["level"] == row["level"]
@@ -92,8 +99,9 @@ def test_json_rows_are_the_ones_docs_results_publishes(row):
     assert f"`{row['row']}`: trained on" in block and row["provenance"]["command"] in block
 
 
-def test_readme_example_runs_and_prints_the_return_it_claims():
-    code = re.search(r"```python\n(.+?)\n```", README.read_text(), re.S).group(1)
+@pytest.mark.parametrize("page", FIRST_SCREENS, ids=page_id)
+def test_example_runs_and_prints_the_return_it_claims(page):
+    code = re.search(r"```python\n(.+?)\n```", page.read_text(), re.S).group(1)
     claimed = re.search(r"#\s*(return -?[\d.]+)\s*$", code.splitlines()[-1]).group(1)
     env = {**os.environ, "MARINE_FORMATION_BACKEND": "numpy", "PYTHONPATH": str(ROOT)}
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
