@@ -2,10 +2,13 @@
 
 The suite runs twice in CI: with the default backend (numba when installed)
 and with ``MARINE_FORMATION_BACKEND=numpy``. Modules whose tests do not
-depend on the backend (pure functions, configuration checks, documentation,
-subprocesses that choose their backend themselves) carry the marker
-``backend_independent`` and are deselected in the numpy run: they would test
-the same code twice.
+depend on the backend carry the marker ``backend_independent`` and are
+deselected in the numpy run, where they would test the same code twice: pure
+functions, configuration checks, documentation, subprocesses that choose
+their backend themselves, ``test_backends.py`` (which builds both), and
+everything above the env (training, export, evaluation tools, benchmarks),
+which ``test_backends.py``'s step-for-step agreement of the two backends
+covers.
 """
 
 from __future__ import annotations

@@ -40,6 +40,8 @@ from marine_formation_env.scenarios import make_config, sample_initial_state
 
 pytest.importorskip("numba")
 
+pytestmark = pytest.mark.backend_independent  # it builds each backend itself
+
 CASES = {
     "paper": {},
     "ring4-noise": {"n_vessels": 4, "topology": "ring"},

@@ -17,6 +17,8 @@ from baselines.pretrained import OWN_SCALE, SLOT_SCALE, MLPPolicy, load_pretrain
 from marine_formation_env import parallel_env
 from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 
 def _own(e=0.0, psi=0.0, u=5.0, v=0.0, kappa=0.0, d_y=0.0) -> np.ndarray:
     own = np.zeros(OWN_SIZE)

@@ -16,6 +16,8 @@ import pytest
 
 import benchmarks.learned_baselines as lb
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 
 def _record(seed: int, learned: float, reference: float, success: float, change: float, extra=None) -> dict:
     record = {

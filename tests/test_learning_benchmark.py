@@ -12,6 +12,8 @@ pytest.importorskip("stable_baselines3")
 from benchmarks import learning
 from marine_formation_env import ENV_ID
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 
 @pytest.mark.parametrize(
     ("item", "message"),

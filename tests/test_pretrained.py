@@ -31,6 +31,8 @@ from baselines.pretrained import (
 from marine_formation_env import ENV_ID, parallel_env
 from marine_formation_env.scenarios import make_config
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(pretrained.PRETRAINED_DIR.glob("*.npz"))
 

@@ -12,6 +12,8 @@ from baselines.sweep import main as sweep_main
 from marine_formation_env.cli import parse_overrides
 from marine_formation_env.scenarios import make_config
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 
 def test_dotted_overrides_collect_into_nested_settings():
     parsed = parse_overrides(["channel.loss=0.3", "channel.latency=2", "current.speed=0.4", "horizon=50"])
