@@ -474,10 +474,10 @@ def _split_table(lines: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]
     return header, rows
 
 
-def publish_markdown(table: str, provenance: str, document: Path) -> None:
+def publish_markdown(table: str, provenance: dict[str, str], document: Path) -> None:
     """Put the rows of ``table`` between the ``learned-baselines`` markers of ``document`` (appended if missing).
 
-    Each row published gets ``provenance`` (the commit, the machine, the command) as its line under the
+    Each row published gets ``provenance[row]`` (the commit, the machine, the command) as its line under the
     table and its learning curves figure (``learning_curves/ROW.png``, beside the document) below. Rows
     already in the document and not in ``table`` stay as they were, with their own provenance: the table can
     be regenerated one row at a time. Rows are in the order of :data:`ROWS`.
@@ -494,7 +494,7 @@ def publish_markdown(table: str, provenance: str, document: Path) -> None:
     sources = {line.split("`", 2)[1]: line.split("`: ", 1)[1] for line in old if line.startswith("- `")}
     header, new_rows = _split_table(table.splitlines())
     rows.update(new_rows)
-    sources.update({name: provenance for name in new_rows})
+    sources.update({name: provenance[name] for name in new_rows})
     order = sorted(rows, key=lambda name: list(ROWS).index(name) if name in ROWS else len(ROWS))
     lines = [MARKERS[0], *header, *(line for name in order for line in rows[name]), ""]
     lines += [f"- `{name}`: {sources[name]}" for name in order if name in sources]
@@ -502,6 +502,70 @@ def publish_markdown(table: str, provenance: str, document: Path) -> None:
     for name in order:
         lines += [f"![{name}: learning curves](learning_curves/{name}.png)", ""]
     atomic_write_text(document, head + "\n".join(lines) + MARKERS[1] + tail)
+
+
+def _cell(stats: dict[str, Any] | None, fmt: str, scale: float = 1.0) -> dict[str, Any] | None:
+    """One measure of a JSON record: ``mean``, ``std`` (over the training seeds) and the table's ``text``."""
+    if stats is None:
+        return None
+    return {"mean": stats["mean"] * scale, "std": stats["std"] * scale, "text": _pm(stats, fmt)}
+
+
+def _measures(summary: dict[str, Any]) -> dict[str, Any]:
+    learned, reference = summary["learned"], summary["reference"]
+    extra = summary.get("reference_extrapolate")
+    target = "met" if summary["target_met"] else "not met"
+    if "smoothness_met" in summary:
+        target += ", smooth" if summary["smoothness_met"] else ", not smooth"
+    return {
+        "learned_return": _cell(learned["return"], "{:.1f}"),
+        "reference_return": _cell(reference["return"], "{:.1f}"),
+        "performance": _cell(summary["performance"], "{:.2f}"),
+        "success_learned": _cell(learned["success"], "{:.0%}", 100.0),
+        "success_reference": _cell(reference["success"], "{:.0%}", 100.0),
+        "action_change_learned": _cell(learned["action_change"], "{:.3g}"),
+        "action_change_reference": _cell(reference["action_change"], "{:.3g}"),
+        "extrapolating_reference": None
+        if extra is None
+        else {"return": _cell(extra["return"], "{:.1f}"), "success": _cell(extra["success"], "{:.0%}", 100.0)},
+        "target": target,
+    }
+
+
+def json_record(row: Row, summary: dict[str, Any], budget: float, scenario: str, level: str,
+                provenance: dict[str, Any]) -> dict[str, Any]:  # fmt: skip
+    """A published row as a record of ``docs/learned_baselines.json`` (the numbers of its table line)."""
+    record: dict[str, Any] = {
+        "row": row.name,
+        "scenario": scenario,
+        "level": level,
+        "learner": "TorchRL MAPPO" if row.pipeline == "torchrl" else "SB3 PPO",
+        "config": f"training/configs/{row.config}",
+        "pipeline": row.pipeline,
+        "budget_minutes": float(budget),
+        "seeds": len(summary["seeds"]),
+        **_measures(summary),
+    }
+    if "settings" in summary:
+        record["settings"] = []
+        for key, sub in summary["settings"].items():
+            size, topology = key[1:].split("_", 1)
+            record["settings"].append({"n_vessels": int(size), "topology": topology, **_measures(sub)})
+    record["provenance"] = provenance
+    return record
+
+
+def publish_json(records: list[dict[str, Any]], document: Path) -> None:
+    """Put ``records`` (:func:`json_record`) into ``document``, replacing the rows of the same name.
+
+    Rows already there and not among ``records`` stay as they were: the table can be regenerated one row at a
+    time. Rows are in the order of :data:`ROWS`.
+    """
+    data = json.loads(document.read_text()) if document.is_file() else {"rows": []}
+    rows = {r["row"]: r for r in data["rows"]}
+    rows.update({r["row"]: r for r in records})
+    data["rows"] = sorted(rows.values(), key=lambda r: list(ROWS).index(r["row"]) if r["row"] in ROWS else len(ROWS))
+    atomic_write_text(document, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
 
 
 def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
@@ -589,8 +653,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_episode(row, first, args.out, args.out / "episodes" / f"{row.name}.png")
     if args.publish:
         docs = DOCS
-        provenance = _provenance(_commit(), records, report["command"])  # records: this call's rows only
-        publish_markdown(table, provenance, docs / "results.md")
+        commit = _commit()
+        fields = {
+            row.name: provenance_fields(commit, [r for r in records if r.get("row") == row.name], report["command"])
+            for row in rows
+        }
+        publish_markdown(table, {name: _provenance(f, name) for name, f in fields.items()}, docs / "results.md")
+        published = []
+        for row, summary in zip(rows, report["rows"], strict=True):
+            if "learned" in summary:
+                scenario, env_kwargs = _scenario_of(args.out / row.name / f"seed_{summary['seeds'][0]}")
+                level = make_config(scenario, **env_kwargs).action_level
+                published.append(json_record(row, summary, budgets[row.name], scenario, level, fields[row.name]))
+        publish_json(published, docs / "learned_baselines.json")
         for row in rows:
             first = next((r for r in records if r.get("row") == row.name and "learned" in r), None)
             if first is None:
@@ -606,21 +681,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
-def _provenance(commit: str, records: list[dict[str, Any]], command: str) -> str:
-    """A published row's line: the commit its runs trained on (and the publishing one, when it differs), the machine.
+def provenance_fields(commit: str, records: list[dict[str, Any]], command: str) -> dict[str, Any]:
+    """Where a published row comes from: ``trained_on`` (a commit, or ``{"seed K": commit}`` when its runs trained
+    on different ones), ``commit`` (the publishing one), ``machine`` and ``command``.
 
     A run found done (its ``result.json``) may have trained on an older commit than the publish's; its record
-    keeps that commit (``unknown`` when written before records kept it). Runs that trained on different commits
-    are listed each with its row and seed.
+    keeps that commit (``unknown`` when written before records kept it).
     """
     runs = [r for r in records if "learned" in r]  # in the order they ran: row by row, seed by seed
     trained = {str(r.get("commit", "unknown")) for r in runs}
-    tail = f"{_machine()}, with `{command}`"
-    if trained <= {commit}:
+    trained_on: Any = trained.pop() if len(trained) == 1 else commit if not trained else None
+    if trained_on is None:
+        trained_on = {f"seed {r.get('seed', '?')}": str(r.get("commit", "unknown")) for r in runs}
+    return {"trained_on": trained_on, "commit": commit, "machine": _machine(), "command": command}
+
+
+def _provenance(fields: dict[str, Any], row: str) -> str:
+    """A published row's line under the table (:func:`provenance_fields` in words)."""
+    tail = f"{fields['machine']}, with `{fields['command']}`"
+    trained, commit = fields["trained_on"], fields["commit"]
+    if trained == commit:
         return f"measured on commit {commit}, {tail}"
-    if len(trained) == 1:
-        return f"trained on commit {trained.pop()} and published from commit {commit}, {tail}"
-    each = ", ".join(f"{r.get('row', '?')} seed {r.get('seed', '?')} on {r.get('commit', 'unknown')}" for r in runs)
+    if isinstance(trained, str):
+        return f"trained on commit {trained} and published from commit {commit}, {tail}"
+    each = ", ".join(f"{row} {seed} on {on}" for seed, on in trained.items())
     return f"trained on several commits ({each}) and published from commit {commit}, {tail}"
 
 

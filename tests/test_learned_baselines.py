@@ -67,7 +67,7 @@ def test_publishing_replaces_only_the_rows_it_ran_and_keeps_the_others_with_thei
     old = f"{header}\n| `survey_speed` | 30 |\n| `paper_speed` | 15 |\n\n- `survey_speed`: by hand\n- `paper_speed`: x"
     document.write_text(f"# Results\n\nbefore\n\n{lb.MARKERS[0]}\n{old}\n{lb.MARKERS[1]}\n\nafter\n")
     new = f"{header}\n| `any_n_speed` | 31 |\n| ↳ n = 8, `ring` | |\n| `paper_speed` | 16 |"
-    lb.publish_markdown(new, "measured on commit abc", document)
+    lb.publish_markdown(new, dict.fromkeys(("any_n_speed", "paper_speed"), "measured on commit abc"), document)
     text = document.read_text()
     assert text.startswith("# Results\n\nbefore\n\n") and text.endswith("\n\nafter\n")
     block = text.split(lb.MARKERS[0])[1].split(lb.MARKERS[1])[0]
@@ -82,7 +82,7 @@ def test_publishing_replaces_only_the_rows_it_ran_and_keeps_the_others_with_thei
     assert "![any_n_speed: learning curves](learning_curves/any_n_speed.png)" in block
     fresh = tmp_path / "empty.md"
     fresh.write_text("# Results\n")
-    lb.publish_markdown(new, "cmd", fresh)
+    lb.publish_markdown(new, dict.fromkeys(("any_n_speed", "paper_speed"), "cmd"), fresh)
     assert fresh.read_text().startswith("# Results\n\n") and fresh.read_text().count(lb.MARKERS[0]) == 1
 
 
@@ -149,19 +149,43 @@ def test_the_any_team_row_is_judged_on_every_team_size_and_graph():
 
 
 def test_a_published_row_names_the_commit_its_runs_trained_on_not_only_the_publishing_one():
-    same = lb._provenance("abc1234", [{"learned": {}, "commit": "abc1234"}], "python -m x --publish")
+    def line(commit, runs, command="cmd"):
+        return lb._provenance(lb.provenance_fields(commit, runs, command), "paper_force")
+
+    same = line("abc1234", [{"learned": {}, "commit": "abc1234"}], "python -m x --publish")
     assert same.startswith("measured on commit abc1234, ") and same.endswith("with `python -m x --publish`")
     runs = [{"learned": {}, "commit": "feec4e0"}, {"learned": {}, "commit": "feec4e0"}, {"failed": "exit 1"}]
-    older = lb._provenance("abc1234", runs, "cmd")
-    assert older.startswith("trained on commit feec4e0 and published from commit abc1234, ")
+    assert lb.provenance_fields("abc1234", runs, "cmd")["trained_on"] == "feec4e0"
+    assert line("abc1234", runs).startswith("trained on commit feec4e0 and published from commit abc1234, ")
     mixed = [
         {"row": "paper_force", "seed": 0, "learned": {}, "commit": "b"},
         {"row": "paper_force", "seed": 1, "learned": {}},
     ]
-    assert lb._provenance("abc1234", mixed, "cmd").startswith(
+    assert lb.provenance_fields("abc1234", mixed, "cmd")["trained_on"] == {"seed 0": "b", "seed 1": "unknown"}
+    assert line("abc1234", mixed).startswith(
         "trained on several commits (paper_force seed 0 on b, paper_force seed 1 on unknown) and published from commit"
         " abc1234, "
     )
+
+
+def test_publishing_the_json_replaces_only_the_rows_it_ran_and_its_record_is_the_table_s_line(tmp_path):
+    row = lb.ROWS["acoustic_speed"]
+    summary = lb.row_summary(row, [{**_record(0, -120.0, -400.0, 0.9, 0.01, extra=-125.0), "row": row.name}])
+    fields = {"trained_on": "abc", "commit": "abc", "machine": "m", "command": "c"}
+    record = lb.json_record(row, summary, 30.0, "acoustic", "speed", fields)
+    line = lb.format_table([summary], {row.name: 30.0}).splitlines()[2]
+    for key in ("learned_return", "reference_return", "performance", "action_change_learned"):
+        assert f"| {record[key]['text']} |" in line or f"| {record[key]['text']} /" in line, key
+    assert record["success_learned"]["mean"] == pytest.approx(90.0) and record["success_learned"]["text"] == "90%"
+    assert record["performance"]["mean"] == pytest.approx(400.0 / 120.0)
+    assert record["extrapolating_reference"]["return"]["text"] == "-125.0" and record["target"] == "met, smooth"
+    assert record["learner"] == "SB3 PPO" and record["config"] == "training/configs/acoustic_speed_ppo.yaml"
+    document = tmp_path / "learned_baselines.json"
+    document.write_text(json.dumps({"description": "d", "rows": [{"row": "any_n_speed"}, {"row": row.name}]}))
+    lb.publish_json([record], document)
+    data = json.loads(document.read_text())
+    assert data["description"] == "d" and [r["row"] for r in data["rows"]] == ["acoustic_speed", "any_n_speed"]
+    assert data["rows"][0] == json.loads(json.dumps(record))
 
 
 def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):

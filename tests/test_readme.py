@@ -96,7 +96,8 @@ def test_json_rows_are_the_ones_docs_results_publishes(row):
     assert cells[4] == row["learned_return"]["text"] and cells[5] == row["reference_return"]["text"]
     assert cells[6] == row["performance"]["text"]
     assert cells[7] == f"{row['success_learned']['text']} / {row['success_reference']['text']}"
-    assert f"`{row['row']}`: trained on" in block and row["provenance"]["command"] in block
+    source = next(line for line in block.splitlines() if line.startswith(f"- `{row['row']}`: "))
+    assert row["provenance"]["commit"] in source and f"`{row['provenance']['command']}`" in source
 
 
 @pytest.mark.parametrize("page", FIRST_SCREENS, ids=page_id)
