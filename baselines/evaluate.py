@@ -59,6 +59,7 @@ from baselines.runs import load_run
 from marine_formation_env.atomic import atomic_path, atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
+from marine_formation_env.provenance import command_line, provenance
 from marine_formation_env.scenarios import SCENARIOS, ScenarioConfig
 
 __all__ = ["evaluate", "is_reference", "main", "make_policy", "parse_overrides", "reference_options"]
@@ -294,6 +295,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.quiet:
         print(format_table(report))
     if args.json:
+        report["provenance"] = provenance(command_line("python -m baselines.evaluate", argv))
         atomic_write_text(args.json, json.dumps(report, indent=2, allow_nan=False, default=_json_default))
     if args.save_trajectory:
         arrays: dict[str, np.ndarray] = {}

@@ -39,6 +39,7 @@ from baselines.ray_cluster import connect
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
+from marine_formation_env.provenance import command_line, provenance
 from marine_formation_env.render import require_matplotlib
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 
@@ -300,6 +301,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, KeyError, TypeError, ImportError, ConnectionError) as err:
         parser.error(str(err))
     table = format_markdown(report)
+    report["provenance"] = provenance(command_line("python -m baselines.sweep", argv))
     atomic_write_text(args.out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))
     atomic_write_text(args.out.with_suffix(".md"), table)
     try:

@@ -28,7 +28,6 @@ a learner's ``initial_scale`` and ``action_scale``::
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +42,7 @@ from marine_formation_env.cli import ArgumentParser, int_at_least, report_error
 from marine_formation_env.core import FormationCore
 from marine_formation_env.dynamics import R, U, V, X, Y
 from marine_formation_env.frontend import InitialStates
+from marine_formation_env.provenance import command_line, provenance
 from marine_formation_env.rules import outside_workspace
 from marine_formation_env.scenarios import SCENARIOS, make_config
 
@@ -190,8 +190,8 @@ def main(argv: list[str] | None = None) -> int:
         ):
             print(f"| {label} | " + " | ".join(f"{v:.4g}" for v in used[key]) + " |")
     if args.json is not None:
-        command = " ".join(["python -m benchmarks.exploration", *(argv or sys.argv[1:])])
-        report: dict[str, Any] = {"command": command, "runs": results}
+        command = command_line("python -m benchmarks.exploration", argv)
+        report: dict[str, Any] = {"provenance": provenance(command), "runs": results}
         if used is not None:
             report["reference"] = used
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")

@@ -70,8 +70,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import platform
 import shutil
 import subprocess
 import sys
@@ -93,6 +91,8 @@ from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_path, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
+from marine_formation_env.provenance import command_line, machine, provenance
+from marine_formation_env.provenance import commit as git_commit
 from marine_formation_env.scenarios import make_config
 from training.export import export_run
 from training.learned import load_learned_policy, member_metrics
@@ -231,7 +231,7 @@ def run_row_seed(row: Row, seed: int, minutes: float, episodes: int, out: Path, 
     if folder.exists():  # an earlier, unfinished or other-budget run of this row and seed: start clean
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
-    commit = _commit()  # the code it trains with: a later --publish may run on a later commit
+    commit = git_commit()  # the code it trains with: a later --publish may run on a later commit
     begin = time.perf_counter()
     done = subprocess.run(_train_command(row, seed, minutes, folder), cwd=ROOT, capture_output=True, text=True)
     atomic_write_text(folder / "train.log", done.stdout + "\n--- stderr ---\n" + done.stderr)
@@ -441,23 +441,6 @@ def _save_figure(fig: Any, path: Path) -> None:
 # ----------------------------------------------------------------------------- publishing
 
 
-def _machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
-def _commit() -> str:
-    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
-    return done.stdout.strip() or "unknown"
-
-
 def _split_table(lines: Sequence[str]) -> tuple[list[str], dict[str, list[str]]]:
     """The header lines of a ``format_table`` table and, per row name, its line and its sub-rows' lines."""
     header: list[str] = []
@@ -630,7 +613,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error("--publish writes the shipped results: run it with every row's own budget (no --minutes)")
     budgets = {row.name: args.minutes if args.minutes is not None else row.minutes for row in rows}
     records: list[dict[str, Any]] = []
-    report: dict[str, Any] = {"command": " ".join([prog, *(argv if argv is not None else sys.argv[1:])])}
+    command = command_line(prog, argv)
+    report: dict[str, Any] = {"command": command, "provenance": provenance(command)}
     for seed in seeds:  # seed-major: a change in the machine's load falls on every row alike
         for row in rows:
             if not args.quiet:
@@ -653,7 +637,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             plot_episode(row, first, args.out, args.out / "episodes" / f"{row.name}.png")
     if args.publish:
         docs = DOCS
-        commit = _commit()
+        commit = report["provenance"]["commit"]
         fields = {
             row.name: provenance_fields(commit, [r for r in records if r.get("row") == row.name], report["command"])
             for row in rows
@@ -693,7 +677,7 @@ def provenance_fields(commit: str, records: list[dict[str, Any]], command: str) 
     trained_on: Any = trained.pop() if len(trained) == 1 else commit if not trained else None
     if trained_on is None:
         trained_on = {f"seed {r.get('seed', '?')}": str(r.get("commit", "unknown")) for r in runs}
-    return {"trained_on": trained_on, "commit": commit, "machine": _machine(), "command": command}
+    return {"trained_on": trained_on, "commit": commit, "machine": machine(), "command": command}
 
 
 def _provenance(fields: dict[str, Any], row: str) -> str:

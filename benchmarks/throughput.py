@@ -57,6 +57,7 @@ import numpy as np
 
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser
+from marine_formation_env.provenance import command_line, provenance
 
 __all__ = ["count_vessel_step_ops", "first_step_latency", "main", "run_case", "team_size_scaling"]
 
@@ -642,6 +643,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.batch_sizes, args.seconds, args.repeats = [1, 64], 0.5, 3
     path = check_writable(args.json, "--json")
     report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
+    report["provenance"] = provenance(command_line("python -m benchmarks.throughput", argv))
     atomic_write_text(path, json.dumps(report, indent=2))  # first: the measurements outlive a formatting error
     print(format_report(report))
     print(f"\nwritten {args.json}")

@@ -29,6 +29,7 @@ from typing import Any
 from benchmarks.throughput import _time_steps
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least
+from marine_formation_env.provenance import command_line, provenance
 from training.torchrl_ppo import make_collector
 
 __all__ = ["main", "run_case"]
@@ -140,6 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for b in args.batch_sizes:
         cases[f"MarineFormationTorchEnv B = {b}"] = _worker("native", b, args.level, args.seconds, args.repeats)
     report = {"level": args.level, "versions": _versions(), "cases": cases}
+    report["provenance"] = provenance(command_line("python -m benchmarks.torchrl_collection", argv))
     if args.json:
         atomic_write_text(args.json, json.dumps(report, indent=2) + "\n")
     print(format_tables(report))

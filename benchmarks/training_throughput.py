@@ -62,6 +62,7 @@ from typing import Any
 
 from marine_formation_env.atomic import atomic_write_text, check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least
+from marine_formation_env.provenance import command_line, provenance
 from training.config import load_config
 from training.learned import evaluate_run, load_learned_policy
 
@@ -293,6 +294,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as err:
         parser.error(str(err))
     report: dict[str, Any] = {
+        "provenance": provenance(command_line("python -m benchmarks.training_throughput", argv)),
         "minutes": args.minutes,
         "episodes": args.episodes,
         "seeds": seed_list,

@@ -7,6 +7,7 @@ of ``docs/`` is on the site.
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -51,3 +52,13 @@ def test_every_docs_page_is_on_the_site():
         generated = page.name.startswith("sweep_") and "sweep_*.md" in config
         name = page.relative_to(ROOT / "docs").as_posix()
         assert generated or f": {name}" in config, name
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "docs").rglob("*.json")), ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_result_file_says_which_commit_command_and_machine_it_comes_from(path):
+    report = json.loads(path.read_text())
+    sources = [row["provenance"] for row in report["rows"]] if "rows" in report else [report["provenance"]]
+    for source in sources:
+        assert re.fullmatch(r"[0-9a-f]{7,40}", source["commit"]), source
+        assert source["command"].startswith("python -m "), source
+        assert "cores" in source["machine"] or "2-core" in source["machine"], source

@@ -8,6 +8,8 @@ tests/test_curved_continuous.py.
 from __future__ import annotations
 
 import math
+import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -223,7 +225,15 @@ def test_command_line_sets_a_path_field(tmp_path):
     assert code in (0, None)
     import json
 
-    assert json.loads(out.read_text())["config"]["path"] == {"kind": "circle", "radius": 500.0, "turn": "left"}
+    report = json.loads(out.read_text())
+    assert report["config"]["path"] == {"kind": "circle", "radius": 500.0, "turn": "left"}
+    # where the result comes from: this checkout's commit, the command as typed, the machine
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=True)
+    assert report["provenance"]["commit"] == head.stdout.strip()
+    assert report["provenance"]["command"].startswith(
+        "python -m baselines.evaluate --scenario circle --set path.radius"
+    )
+    assert f"{os.cpu_count()} cores" in report["provenance"]["machine"]
 
 
 # --------------------------------------------------------------------------- observations on a curved path
