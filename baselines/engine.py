@@ -1,8 +1,8 @@
 """One evaluation engine: run a policy for many seeds at once and record every episode.
 
-:func:`evaluate_episodes` runs one episode per seed, all seeds as one batch of
-formations on :class:`~marine_formation_env.vector.MarineFormationVectorEnv`
-(``layout="agent"``), and returns one :class:`~baselines.rollout.Trajectory`
+``evaluate_episodes`` runs one episode per seed, all seeds as one batch of
+formations on ``MarineFormationVectorEnv``
+(``layout="agent"``), and returns one ``Trajectory``
 per seed. Formation ``b`` is reset with ``seeds[b]``, so its episode is the
 one ``parallel_env(...).reset(seed=seeds[b])`` starts (tests/test_engine.py
 checks it against a ParallelEnv loop). Every script that evaluates a policy
@@ -11,7 +11,7 @@ calls it.
 
 Policies:
 
-* a :class:`~baselines.rollout.BatchPolicy` (the reference, learned models,
+* a ``BatchPolicy`` (the reference, learned models,
   the random policy) acts on all vessels of all formations in one call,
   ``act_batch((B·N, dim)) -> (B·N, A)``;
 * any other object with ``act(observations)`` over PettingZoo dicts is called
@@ -54,7 +54,7 @@ def evaluate_episodes(
         seeds: one reset seed per episode (formation ``b`` gets ``seeds[b]``).
         options: ``reset`` options, as for the vector env (an ``initial_state``
             of shape ``(n, 6)`` applies to every episode).
-        backend: as for :class:`~marine_formation_env.core.FormationCore`.
+        backend: as for ``FormationCore``.
 
     Returns:
         ``[Trajectory]`` in the order of ``seeds``; each ends when its
@@ -73,7 +73,7 @@ def evaluate_episodes(
 def episode_reports(
     policy: Any, config: ScenarioConfig, seeds: Sequence[int], backend: str = "auto"
 ) -> tuple[list[dict[str, Any]], list[Trajectory]]:
-    """:func:`evaluate_episodes` and the metrics of each episode (:func:`~baselines.metrics.episode_metrics`).
+    """``evaluate_episodes`` and the metrics of each episode (``episode_metrics``).
 
     Returns:
         ``(metrics, trajectories)``: per seed, its metrics (with ``"seed"``)
@@ -170,13 +170,13 @@ def run_episode(
     """Roll out one episode of ``policy`` on ``env``'s scenario and record it.
 
     The episode is the one ``env.reset(seed=seed, options=options)`` starts;
-    it runs on the evaluation engine (:func:`evaluate_episodes`,
+    it runs on the evaluation engine (``evaluate_episodes``,
     one formation, ``env``'s backend), which leaves ``env`` itself untouched.
 
     Args:
         env: a ParallelEnv of this package (its configuration and backend are used).
         policy: has ``act(observations)`` or ``act_batch``; optionally
-            ``commands`` and ``reset()`` (see :mod:`baselines.engine`).
+            ``commands`` and ``reset()`` (see ``baselines.engine``).
         seed, options: the reset seed and options.
     """
     return evaluate_episodes(policy, env.config, [seed], options=options, backend=env.core.backend)[0]

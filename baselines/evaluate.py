@@ -76,7 +76,7 @@ def is_reference(spec: str) -> bool:
 
 
 def reference_options(spec: str) -> dict[str, Any]:
-    """Keyword arguments of :class:`ReferencePolicy` from ``reference[:opt,opt=value]``."""
+    """Keyword arguments of ``ReferencePolicy`` from ``reference[:opt,opt=value]``."""
     _, _, raw = spec.partition(":")
     options: dict[str, Any] = {}
     for item in filter(None, (part.strip() for part in raw.split(","))):
@@ -108,7 +108,7 @@ def is_model_path(spec: str) -> bool:
 
 
 def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
-    """Load a saved model and its run config (:func:`baselines.runs.load_run`; needs the trainer's extra)."""
+    """Load a saved model and its run config (``baselines.runs.load_run``; needs the trainer's extra)."""
     return load_run(spec)
 
 

@@ -1,4 +1,4 @@
-"""Episode metrics of the paper's control goals (7)-(10), computed from a :class:`Trajectory`.
+"""Episode metrics of the paper's control goals (7)-(10), computed from a ``Trajectory``.
 
 Definitions (n vessels, θ_j = x_j − D_xj):
 
@@ -19,7 +19,7 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   (as u_j − u_d on the straight path);
 * settling time: the earliest time after which, until the end of the episode,
   max |e_j| ≤ 0.5 m, max |ψ_j| ≤ 0.5°, the spread ≤ 0.5 m and
-  max |u_j − u_d| ≤ 0.05 m/s (:data:`SETTLING_BANDS`); None if never;
+  max |u_j − u_d| ≤ 0.05 m/s (``SETTLING_BANDS``); None if never;
 * time outside the band: control periods with some u_cj ∉ (U_min, U_max), in s;
   and the same for the vessels' actual surge speeds u_j (recorded states);
 * effort: mean over periods and vessels of the squared normalized action ‖a‖²/A;
@@ -27,12 +27,12 @@ Definitions (n vessels, θ_j = x_j − D_xj):
   action components of the normalized action's change |a_k − a_{k−1}|
   (each component in [−1, 1], so 0 … 2; 0 for a constant command); and the
   same per component, ``action_change_<command>`` with the level's command
-  names (:data:`marine_formation_env.actions.LEVEL_COMMANDS`: ``tau_u``,
+  names (``marine_formation_env.actions.LEVEL_COMMANDS``: ``tau_u``,
   ``tau_r``; ``u_c``, ``psi_d``; ``u_c``), which says which command chatters;
 * return: per-vessel sum of rewards, averaged over vessels;
 * success: the episode ran to its time limit (no collision, no exit from the
   workspace or envelope) and at its end every error is inside
-  :data:`SUCCESS_BANDS`: max |e_j| ≤ 1 m, max |ψ_j| ≤ 2°, spread ≤ 1 m,
+  ``SUCCESS_BANDS``: max |e_j| ≤ 1 m, max |ψ_j| ≤ 2°, spread ≤ 1 m,
   max |u_j − u_d| ≤ 0.1 m/s.
 """
 
@@ -150,7 +150,7 @@ def _surge_outside_time(traj: Trajectory, cfg: ScenarioConfig) -> float:
 def action_change(actions: np.ndarray) -> float:
     """Mean |a_k − a_{k−1}| of ``(T, n, A)`` normalized actions over k ≥ 1, vessels and components (0 if T < 2).
 
-    The mean of :func:`action_change_by_entry` (every component has the same number of changes).
+    The mean of ``action_change_by_entry`` (every component has the same number of changes).
     """
     return float(np.mean(action_change_by_entry(actions)))
 

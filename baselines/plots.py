@@ -1,6 +1,6 @@
 """Figures in the style of the paper's Fig. 6 (matplotlib, imported lazily).
 
-:func:`plot_episode` draws, for one recorded episode:
+``plot_episode`` draws, for one recorded episode:
 
 (a) the paths in the plane with the desired paths and the vessels drawn as
     oriented markers at a few instants, (b) cross-track errors y_j − D_yj,

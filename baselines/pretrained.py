@@ -20,7 +20,7 @@ and from the command line, next to the reference::
 A policy takes another scenario with the same observation layout and action
 level (that is how generalization is measured: ``--scenario acoustic`` with
 ``pretrained:paper_speed``); a team size, action level or layout it cannot
-take is refused by :func:`check_compatible`, naming both sides.
+take is refused by ``check_compatible``, naming both sides.
 
 Two network kinds:
 
@@ -31,14 +31,14 @@ Two network kinds:
     (SB3's deterministic action, the Gaussian's mean clipped to the action
     space) or ``tanh`` (TorchRL's tanh-squashed Gaussian's mode). It exists
     for one team size. A file may add ``inputs`` (a fixed input map first:
-    :func:`predicted_inputs`) or ``input_mask`` (entries the network does not
+    ``predicted_inputs``) or ``input_mask`` (entries the network does not
     read, zeroed first: ``training.torchrl_ppo``'s ``drop_inputs``).
 ``slots``
     the same, after a graph network over the observation's slots
-    (:func:`slot_features`, ``training.slot_policy``): it takes any number
+    (``slot_features``, ``training.slot_policy``): it takes any number
     of slots, so any team size.
 
-Files are written atomically by :func:`save_pretrained`; ``training.export``
+Files are written atomically by ``save_pretrained``; ``training.export``
 makes one from a run folder (``python -m training.export RUN --name NAME``).
 """
 
@@ -79,7 +79,7 @@ PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 FORMAT = 1
 KINDS = ("mlp", "slots")
 SQUASHES = ("clip", "tanh")
-#: What an :class:`MLPPolicy` reads: the observation itself, or :func:`predicted_inputs` of it.
+#: What an ``MLPPolicy`` reads: the observation itself, or ``predicted_inputs`` of it.
 INPUTS = ("raw", "predicted")
 
 
@@ -128,8 +128,8 @@ class MLPPolicy(BatchPolicy):
         std: its deviation,
         clip: and its bound.
         squash: ``clip`` (to [−1, 1]) or ``tanh``, applied to the first ``action_dim`` outputs.
-        features: the weights of :func:`slot_features` (a ``slots`` network: any number of slots), or None.
-        inputs: ``raw``, or ``predicted``: the network reads :func:`predicted_inputs` of the observation (before
+        features: the weights of ``slot_features`` (a ``slots`` network: any number of slots), or None.
+        inputs: ``raw``, or ``predicted``: the network reads ``predicted_inputs`` of the observation (before
             the normalization above; ``training.torchrl_ppo``'s ``inputs: predicted``).
         input_mask: ``(observation_dim,)`` of 0 and 1 multiplying the observation before everything else (0: an
             entry the network does not read; ``training.torchrl_ppo``'s ``drop_inputs``), or None.
@@ -172,7 +172,7 @@ class MLPPolicy(BatchPolicy):
                 f"input_mask must be {self.observation_dim} zeros and ones (an MLP's inputs), got {input_mask!r}"
             )
         self.action_dim = int(action_dim)
-        #: the header of the file it was loaded from (:func:`load_pretrained`), else None
+        #: the header of the file it was loaded from (``load_pretrained``), else None
         self.info: PretrainedInfo | None = None
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
@@ -227,7 +227,7 @@ class MLPPolicy(BatchPolicy):
 
 #: Fixed scales of the own entries of a slot network (``training.slot_policy``): e [m], ψ [rad], u, v [m/s],
 #: r [rad/s], u_d [m/s], u̇_d [m/s²], κ, κ ahead [1/m], and κ·D_y in place of the lane offset D_y (see
-#: :func:`own_inputs`).
+#: ``own_inputs``).
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
@@ -238,7 +238,7 @@ AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0])
 
 def own_inputs(own: np.ndarray) -> np.ndarray:
     """A slot network's own inputs: the own part (``(..., OWN_SIZE)``) with the lane offset D_y replaced by
-    κ·D_y, divided by :data:`OWN_SCALE`.
+    κ·D_y, divided by ``OWN_SCALE``.
 
     The lane offset grows with the team (the paper's lanes, 50 m apart, span −450 to 500 m at n = 20 and
     −100 to 150 m at n = 6), so read raw it is an input no training team shows, and it biases each vessel's speed by its
@@ -253,7 +253,7 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
 
 
 def _own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of :func:`predicted_inputs`."""
+    """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of ``predicted_inputs``."""
     obs = np.asarray(obs, dtype=np.float64)
     k = slot_count(obs.shape[-1])
     own = obs[..., :OWN_SIZE]
@@ -266,22 +266,22 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
     """The slot network's fixed input map, keeping the observation's layout ``(..., dim) → (..., dim)``.
 
     Each slot's Δθ predicted to now from the message's velocity and age (as ``reference:extrapolate``),
-    κ·D_y for the lane offset (:func:`own_inputs`), every entry divided by :data:`OWN_SCALE` or
-    :data:`SLOT_SCALE`. ``training.inputs.PredictedInputs`` is the same map in torch (``training.torchrl_ppo``'s
+    κ·D_y for the lane offset (``own_inputs``), every entry divided by ``OWN_SCALE`` or
+    ``SLOT_SCALE``. ``training.inputs.PredictedInputs`` is the same map in torch (``training.torchrl_ppo``'s
     ``inputs: predicted``).
     """
     own, slots = _own_and_slots(obs)
     return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
 
 
-#: The arrays every :func:`slot_features` weights dict holds,
+#: The arrays every ``slot_features`` weights dict holds,
 SLOT_WEIGHTS = ("message_w0", "message_b0", "message_w1", "message_b1", "own_w0", "own_b0")
 #: and the one an option adds (``SlotFeatures(zero_at_agreement=True)``).
 SLOT_OPTIONS = ("zero_at_agreement",)
 
 
 def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """:func:`slot_features`' weights as float64 arrays, or a ValueError naming what is missing, unknown or bad."""
+    """``slot_features``' weights as float64 arrays, or a ValueError naming what is missing, unknown or bad."""
     out = {k: np.asarray(v, dtype=np.float64) for k, v in features.items()}
     missing = [k for k in SLOT_WEIGHTS if k not in out]
     unknown = [k for k in out if k not in SLOT_WEIGHTS + SLOT_OPTIONS]
@@ -295,7 +295,7 @@ def _checked_features(features: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def _message(pairs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray:
-    """The message network φ of :func:`slot_features` (two tanh layers) on ``[own, slot]`` pairs."""
+    """The message network φ of ``slot_features`` (two tanh layers) on ``[own, slot]`` pairs."""
     h = np.tanh(pairs @ weights["message_w0"] + weights["message_b0"])
     return np.tanh(h @ weights["message_w1"] + weights["message_b1"])
 

@@ -1,7 +1,7 @@
 """Joining a Ray cluster from the project's command lines (``--address``).
 
 ``python -m training.rllib_ppo --address ...`` and ``python -m baselines.sweep
---address ...`` share :func:`connect`. The address is what Ray's own tools
+--address ...`` share ``connect``. The address is what Ray's own tools
 take:
 
 - ``HOST:PORT`` of a running cluster's head (what ``ray start --head`` prints),

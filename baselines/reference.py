@@ -1,6 +1,6 @@
 """The paper's controller as a policy over the masked per-agent observations.
 
-:class:`ReferencePolicy` computes, for each vessel ``j`` and from ``j``'s own
+``ReferencePolicy`` computes, for each vessel ``j`` and from ``j``'s own
 observation only (never the global state):
 
 * the coordination law (20): ``s_j = Σ_{i∈A_j} (θ_j − θ_i)`` from the link
@@ -39,8 +39,8 @@ Two options go beyond the paper (our extensions, off by default):
   ``speed`` the env's built-in LOS steers, and the scenario's
   ``los_integral_gain`` makes it integral LOS. At ``force`` the ILOS angle
   replaces ψ_LOS in (14); its feed-forward omits the integrator's slow
-  contribution σ·ė_int. The integrators are state: call :meth:`reset` at
-  every episode start (:func:`~baselines.engine.run_episode` does).
+  contribution σ·ė_int. The integrators are state: call ``reset`` at
+  every episode start (``run_episode`` does).
 """
 
 from __future__ import annotations
@@ -96,13 +96,13 @@ class ReferencePolicy(BatchPolicy):
 
     Args:
         env: a ParallelEnv of this package, anything with a ``config``
-            attribute (wrappers are unwrapped), or a :class:`ScenarioConfig`.
+            attribute (wrappers are unwrapped), or a ``ScenarioConfig``.
         extrapolate: predict each neighbour's position now from its last
             message's velocity and age (module docstring).
         integral_los: σ > 0 [m/s] to steer with integral LOS (module
             docstring; ``guidance`` and ``force`` levels); None: the paper's LOS.
 
-    Use :meth:`act` with a PettingZoo observation dict, or :meth:`act_batch`
+    Use ``act`` with a PettingZoo observation dict, or ``act_batch``
     with an array of observations ``(..., obs_dim)``.
     """
 
@@ -151,7 +151,7 @@ class ReferencePolicy(BatchPolicy):
         """Physical commands for observations ``(..., obs_dim)``.
 
         ``advance`` steps the integral-LOS integrators after use (once per
-        control period: :meth:`act_batch` does it).
+        control period: ``act_batch`` does it).
 
         Returns:
             ``{"u_c", "u_c_dot"}`` always, plus ``psi_d`` (guidance) or

@@ -1,11 +1,11 @@
 """Policies and the record of an episode.
 
 A *policy* is any object with ``act(observations) -> actions`` over the
-PettingZoo dicts; a :class:`BatchPolicy` also acts on stacked observations
-(``act_batch``), which lets the evaluation engine (:mod:`baselines.engine`)
-run many episodes at once. :class:`Trajectory` is what an episode leaves:
+PettingZoo dicts; a ``BatchPolicy`` also acts on stacked observations
+(``act_batch``), which lets the evaluation engine (``baselines.engine``)
+run many episodes at once. ``Trajectory`` is what an episode leaves:
 states, commands, actions and rewards as arrays
-(:func:`baselines.engine.run_episode` records one).
+(``baselines.engine.run_episode`` records one).
 """
 
 from __future__ import annotations
@@ -20,13 +20,13 @@ __all__ = ["BatchPolicy", "Policy", "RandomPolicy", "Trajectory"]
 
 
 class Policy(Protocol):
-    """What the evaluation engine (:mod:`baselines.engine`) needs of a policy."""
+    """What the evaluation engine (``baselines.engine``) needs of a policy."""
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]: ...
 
 
 class BatchPolicy:
-    """A policy defined on stacked observations: subclasses implement :meth:`act_batch`.
+    """A policy defined on stacked observations: subclasses implement ``act_batch``.
 
     Every vessel acts from its own observation with the same function
     (parameter sharing), so a PettingZoo dict is stacked, acted on, and split.

@@ -3,14 +3,14 @@
 Every trainer writes a run folder with a ``config.yaml`` whose top-level
 ``trainer`` field names it (``sb3``, ``torchrl``, ``rllib``). The loader of
 each trainer is registered as a Python entry point in the group
-:data:`TRAINER_GROUP` (the ``training`` package registers its three in
+``TRAINER_GROUP`` (the ``training`` package registers its three in
 ``pyproject.toml``), so this module finds a run's loader by that field
 without importing any trainer: ``baselines`` stays free of torch, and a
 third-party trainer can register its own.
 
 A loader is called as ``loader(path, deterministic=True)`` with the path the
 user named (the run folder, or a policy or checkpoint file in it) and returns
-``(policy, config)``: a :class:`~baselines.rollout.BatchPolicy` and the run's
+``(policy, config)``: a ``BatchPolicy`` and the run's
 resolved configuration (``scenario`` and ``env_kwargs`` say what it trained on).
 """
 

@@ -14,7 +14,7 @@ The base scenario keeps everything but the swept settings: loss is Bernoulli
 (a Gilbert–Elliott ``burst`` of the scenario is dropped) and the latency is
 fixed (the scenario's jitter is kept). By default the vessels start around
 their formation slots with random offsets (the generated formations' noise,
-:data:`~marine_formation_env.scenarios.GENERATED_INIT_NOISE`) and a 5 m
+``GENERATED_INIT_NOISE``) and a 5 m
 safety distance, so that collisions mean something: the paper's own initial
 state makes two vessels cross 0.5 m apart even over ideal links
 (``--paper-initial-state`` keeps it). Episode ``k`` of every cell uses reset

@@ -1,6 +1,6 @@
 """BenchMARL MAPPO on ``marine_formation/paper_speed`` for a wall-clock budget, then the common evaluation.
 
-A step of :mod:`benchmarks.training_throughput`, run with the interpreter of
+A step of ``benchmarks.training_throughput``, run with the interpreter of
 the ecosystem environment (BenchMARL needs TorchRL 0.11)::
 
     .venv-ecosystem/bin/python -m benchmarks.benchmarl_budget --minutes 15 --out runs/throughput/benchmarl
@@ -10,7 +10,7 @@ no loggers, no evaluation during training, which would render videos) runs
 until an iteration ends past the budget: a BenchMARL callback stops it there.
 The policy is then evaluated deterministically by the engine of
 ``baselines.evaluate`` on the seeds every pipeline of the benchmark uses
-(:func:`training.learned.evaluate_run`), and ``evaluation.json`` is written.
+(``training.learned.evaluate_run``), and ``evaluation.json`` is written.
 """
 
 from __future__ import annotations

@@ -58,7 +58,7 @@ def lifetimes(
     """Seconds each of ``formations`` formations lasts under ``N(0, scale²)`` actions (the horizon if it never ends).
 
     Returns a dict with ``seconds`` (one entry per formation), ``ended_by``: the fraction of formations that each
-    bound ended (:data:`CAUSES`: |r| > max_yaw_rate, |u| or |v| > max_speed, outside the workspace, two vessels
+    bound ended (``CAUSES``: |r| > max_yaw_rate, |u| or |v| > max_speed, outside the workspace, two vessels
     closer than the safety distance; the first that holds on the last state), and the ``horizon``.
     """
     if not scale > 0:
@@ -95,7 +95,7 @@ def lifetimes(
 def reference_actions(scenario: str, level: str, seeds: list[int], after: float) -> dict[str, Any]:
     """How much of each actuator's range the reference uses: quantiles of |a| per action entry.
 
-    Runs :class:`~baselines.reference.ReferencePolicy` for one episode per seed and returns, per entry (a list
+    Runs ``ReferencePolicy`` for one episode per seed and returns, per entry (a list
     of ``action_dim``), ``max``, ``p99`` and ``median`` of |a| over every vessel and control period, and
     ``max_after``: the largest |a| after ``after`` seconds. The actions are those the env applied (clipped).
     """
@@ -116,7 +116,7 @@ def reference_actions(scenario: str, level: str, seeds: list[int], after: float)
 
 
 def _cause(config: Any, state: np.ndarray) -> str:
-    """Which bound a terminated formation's last state ``(N, 6)`` broke, the first of :data:`CAUSES` that holds."""
+    """Which bound a terminated formation's last state ``(N, 6)`` broke, the first of ``CAUSES`` that holds."""
     if np.any(np.abs(state[:, R]) > config.max_yaw_rate):
         return "yaw_rate"
     if np.any(np.abs(state[:, [U, V]]) > config.max_speed):

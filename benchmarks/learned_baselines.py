@@ -463,7 +463,7 @@ def publish_markdown(table: str, provenance: dict[str, str], document: Path) -> 
     Each row published gets ``provenance[row]`` (the commit, the machine, the command) as its line under the
     table and its learning curves figure (``learning_curves/ROW.png``, beside the document) below. Rows
     already in the document and not in ``table`` stay as they were, with their own provenance: the table can
-    be regenerated one row at a time. Rows are in the order of :data:`ROWS`.
+    be regenerated one row at a time. Rows are in the order of ``ROWS``.
     """
     text = document.read_text() if document.is_file() else ""
     old: list[str] = []
@@ -539,10 +539,10 @@ def json_record(row: Row, summary: dict[str, Any], budget: float, scenario: str,
 
 
 def publish_json(records: list[dict[str, Any]], document: Path) -> None:
-    """Put ``records`` (:func:`json_record`) into ``document``, replacing the rows of the same name.
+    """Put ``records`` (``json_record``) into ``document``, replacing the rows of the same name.
 
     Rows already there and not among ``records`` stay as they were: the table can be regenerated one row at a
-    time. Rows are in the order of :data:`ROWS`.
+    time. Rows are in the order of ``ROWS``.
     """
     data = json.loads(document.read_text()) if document.is_file() else {"rows": []}
     rows = {r["row"]: r for r in data["rows"]}
@@ -681,7 +681,7 @@ def provenance_fields(commit: str, records: list[dict[str, Any]], command: str) 
 
 
 def _provenance(fields: dict[str, Any], row: str) -> str:
-    """A published row's line under the table (:func:`provenance_fields` in words)."""
+    """A published row's line under the table (``provenance_fields`` in words)."""
     tail = f"{fields['machine']}, with `{fields['command']}`"
     trained, commit = fields["trained_on"], fields["commit"]
     if trained == commit:

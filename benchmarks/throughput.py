@@ -10,7 +10,7 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
 * ``parallel``: our PettingZoo ParallelEnv (one formation) vs MPE2
   ``simple_spread_v3.parallel_env(N=3, continuous_actions=True)``: steps/s,
   dict in, dicts out, resetting when an episode ends.
-* ``batched``: our :class:`~marine_formation_env.vector.MarineFormationVectorEnv`
+* ``batched``: our ``MarineFormationVectorEnv``
   (the batched core, with autoreset) at B = 1, 64, 1024, 8192 formations vs
   VMAS ``simple_spread`` on the CPU (``n_agents=3``, continuous actions) at the
   same B: env-steps/s (formation-steps: B per call).
@@ -80,7 +80,7 @@ def _time_steps(
 
     ``step(k)`` takes one step and returns how many episode ends (resets) it
     went through. The warm-up lasts at least ``warmup_seconds`` *and* until
-    :data:`WARMUP_RESETS` resets have happened, so that every code path,
+    ``WARMUP_RESETS`` resets have happened, so that every code path,
     autoreset included, has run (and been compiled) before timing; a peer
     that never resets (``step`` returning 0) warms up for the time alone.
     Reports the median, the spread (min, quartiles, max) and every repeat.
@@ -199,7 +199,7 @@ JAX_SCAN_STEPS = 100
 def _jaxmarl_batched(b: int, min_seconds: float, repeats: int, scan: bool) -> dict[str, Any]:
     """JaxMARL's MPE ``simple_spread`` (3 agents, continuous actions), jit-compiled and vmapped over ``b``.
 
-    ``scan``: :data:`JAX_SCAN_STEPS` steps per call inside ``lax.scan`` (no
+    ``scan``: ``JAX_SCAN_STEPS`` steps per call inside ``lax.scan`` (no
     Python between steps: the way JaxMARL is meant to be used, and the fastest
     for it); otherwise one jitted, vmapped step per Python call, as a Python
     training loop steps an env (the like-for-like comparison). JaxMARL resets
@@ -369,7 +369,7 @@ SCALING_B = 256
 
 
 def team_size_scaling(min_seconds: float, repeats: int, sizes: Sequence[int] = TEAM_SIZES) -> dict[str, Any]:
-    """env-steps/s and vessel-steps/s at B = :data:`SCALING_B` for n vessels on a random sparse digraph.
+    """env-steps/s and vessel-steps/s at B = ``SCALING_B`` for n vessels on a random sparse digraph.
 
     Ideal links and the ``acoustic`` channel. The cost of one env-step grows
     with n (the observation holds n − 1 slots per vessel, so it is O(n²) per

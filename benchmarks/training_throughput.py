@@ -166,11 +166,11 @@ def summarize(runs: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """One summary per pipeline (in the order first seen) over the runs that finished.
 
     Each summary has ``seeds`` (those that finished) and, per quantity of
-    :data:`MEASURES`, ``{mean, std, min, max, per_seed}``; runs that failed or
+    ``MEASURES``, ``{mean, std, min, max, per_seed}``; runs that failed or
     were skipped are listed under ``failed`` / ``skipped``. Every pipeline
     other than SB3 also gets ``vs_sb3``: the ratio of its mean vessel-steps/s
     to SB3's, its mean return minus SB3's, and ``target_met`` (ratio ≥
-    :data:`TARGET_RATIO` and the return difference ≥ 0).
+    ``TARGET_RATIO`` and the return difference ≥ 0).
     """
     names = list(dict.fromkeys(r["pipeline"] for r in runs))
     summaries: list[dict[str, Any]] = []

@@ -1,7 +1,7 @@
 """Optional compiled backend: one fused numba kernel for a whole batched step.
 
 It compiles the *same* model and controller functions as the numpy path
-(:mod:`~marine_formation_env.dynamics`, :mod:`~marine_formation_env.control`):
+(``dynamics``, ``control``):
 they are registered with numba (``register_jitable``) and called per vessel on
 scalars, so the equations exist once. What the kernel adds is the loop: per
 formation (in parallel), per vessel, the RK4 substeps of the level's closed
@@ -9,13 +9,13 @@ loop, then the masked observations, reward components and terminations, all
 without temporaries. With non-ideal links the same loop then runs the
 formation's channel instant (sensor noise, links, loss, delays, the held
 messages, the observations through them) on the channel's arrays in place,
-reading the same random rows as :class:`~marine_formation_env.channel.LinkChannel`;
+reading the same random rows as ``LinkChannel``;
 formations that restart (autoreset) load their initial state instead of
 stepping. On a curved path (docs/paths.md) the kernel also follows each
 vessel's projection on the path (``paths.segment_project``, Newton from the
 previous value after every RK4 step) and evaluates the loops, observations,
 rewards and the corridor in path coordinates, as the numpy step does.
-:class:`~marine_formation_env.core.FormationCore` uses it when numba is
+``FormationCore`` uses it when numba is
 installed (``backend="auto"``) and keeps the numpy path as the reference
 implementation; the tests check that both agree.
 """
@@ -169,7 +169,7 @@ def _curved_stage(  # type: ignore[no-untyped-def]
     level, p, g, s0, sx, sy, sg, sk, guess, steer,
     x, y, psi, u, v, r, k, step, cmd1, t, u_c0, u_c_dot, tu_max, tr_max, sea,
 ):  # fmt: skip
-    """:func:`_curved_derivative` at the RK4 stage state ``(x, y, ψ, u, v, r) + step·k``."""
+    """``_curved_derivative`` at the RK4 stage state ``(x, y, ψ, u, v, r) + step·k``."""
     return _curved_derivative(
         level, p, g, s0, sx, sy, sg, sk, guess, steer,
         x + step * k[0], y + step * k[1], psi + step * k[2], u + step * k[3], v + step * k[4], r + step * k[5],
@@ -788,8 +788,8 @@ def source_key() -> str:
     numba's on-disk cache is invalidated only when the file that holds the
     jitted function changes, not when a function it calls from another module
     does. The kernels' names carry this digest, so an edit of a rule in
-    :mod:`~marine_formation_env.rules` (or of the model, a controller or the
-    channel's :func:`~marine_formation_env.channel.in_range`)
+    ``rules`` (or of the model, a controller or the
+    channel's ``in_range``)
     compiles a new kernel instead of loading a stale one from the cache.
     """
     digest = hashlib.sha256()
@@ -812,20 +812,20 @@ def step_kernel(n_formations: int) -> Any:
 
 
 class StepKernel:
-    """The compiled step of one :class:`~marine_formation_env.core.FormationCore`: its arguments packed once.
+    """The compiled step of one ``FormationCore``: its arguments packed once.
 
     Everything the kernel needs that does not change between steps (the
     vessel, the gains, the level, the limits, the reward weights, the
     observation bounds and slot geometry, the channel's constants) is packed
-    at construction (the reward again by :meth:`set_reward`); :meth:`run`
+    at construction (the reward again by ``set_reward``); ``run``
     passes the per-step arrays.
 
     With non-ideal links (``channel`` given) the same kernel also runs the
     channel's control instant for each formation right after its step, on the
-    arrays of the core's :class:`~marine_formation_env.channel.LinkChannel`
-    and :class:`~marine_formation_env.disturbances.SensorNoiseSource` in place:
+    arrays of the core's ``LinkChannel``
+    and ``SensorNoiseSource`` in place:
     the numpy path (which still serves
-    :meth:`~marine_formation_env.core.FormationCore.reset`) and the kernel
+    ``reset``) and the kernel
     share one channel state, and the kernel reads their block streams of
     uniforms and normals row by row, as their ``take`` does, so both draw the
     same numbers in the same order.

@@ -17,7 +17,7 @@ from marine_formation_env.scenarios import ScenarioConfig
 __all__ = ["LEVEL_COMMANDS", "action_space", "map_actions", "normalized_actions", "physical_commands"]
 
 #: The physical command behind each action entry of a level, in the action's order
-#: (the keys of :func:`physical_commands`).
+#: (the keys of ``physical_commands``).
 LEVEL_COMMANDS = {"force": ("tau_u", "tau_r"), "guidance": ("u_c", "psi_d"), "speed": ("u_c",)}
 
 
@@ -38,7 +38,7 @@ def physical_commands(config: ScenarioConfig, actions: np.ndarray) -> dict[str, 
 
 
 def map_actions(cfg: ScenarioConfig, a: np.ndarray) -> dict[str, np.ndarray]:
-    """:func:`physical_commands` of actions already inside [−1, 1]."""
+    """``physical_commands`` of actions already inside [−1, 1]."""
     if cfg.action_level == "force":
         return {"tau_u": a[..., 0] * cfg.tau_u_max, "tau_r": a[..., 1] * cfg.tau_r_max}
     u_c = cfg.u_min + 0.5 * (a[..., 0] + 1.0) * (cfg.u_max - cfg.u_min)
@@ -48,7 +48,7 @@ def map_actions(cfg: ScenarioConfig, a: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def normalized_actions(config: ScenarioConfig, **commands: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`physical_commands` (clipped to [−1, 1]), shape ``(..., A)``."""
+    """Inverse of ``physical_commands`` (clipped to [−1, 1]), shape ``(..., A)``."""
     cfg = config
     if cfg.action_level == "force":
         cols = [commands["tau_u"] / cfg.tau_u_max, commands["tau_r"] / cfg.tau_r_max]

@@ -1,9 +1,9 @@
 """Files that are either written whole or not at all.
 
 Every file the project writes (reports, trajectories, figures, checkpoints,
-configs) goes through :func:`atomic_path`: the content is written into a
+configs) goes through ``atomic_path``: the content is written into a
 temporary file in the destination's folder, flushed to disk, and then moved
-over the destination with :func:`os.replace`, which is atomic on POSIX and
+over the destination with ``os.replace``, which is atomic on POSIX and
 Windows. A process killed mid-write leaves the previous file (or none) and a
 hidden ``.NAME.*.tmp`` file, never a truncated ``NAME``.
 """
@@ -95,13 +95,13 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (:func:`atomic_path`)."""
+    """Write ``data`` to ``path`` atomically (``atomic_path``)."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`atomic_path`)."""
+    """Write ``text`` (UTF-8) to ``path`` atomically (``atomic_path``)."""
     atomic_write_bytes(path, text.encode("utf-8"))
 
 

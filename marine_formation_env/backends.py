@@ -1,6 +1,6 @@
 """Which implementation of the step runs: the numpy reference path or the compiled numba kernel.
 
-Both compute the same rules (:mod:`marine_formation_env.rules`) and agree to
+Both compute the same rules (``marine_formation_env.rules``) and agree to
 floating-point rounding (``tests/test_backends.py``).
 """
 

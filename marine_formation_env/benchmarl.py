@@ -2,7 +2,7 @@
 
 The environment ``marine_formation`` of BenchMARL: every task is one
 scenario of this project with its overrides, built as a
-:class:`~marine_formation_env.torchrl.MarineFormationTorchEnv` of
+``MarineFormationTorchEnv`` of
 ``num_envs`` formations (no PettingZoo wrapper, no Python loop over
 formations). The agent group is ``vessel``; ``state`` (every vessel's state
 and the time) feeds MAPPO's and MASAC's centralized critics; the reward terms,
@@ -51,7 +51,7 @@ registry)::
         task.overrides.channel.loss=0.3 experiment.loggers=[csv]
 
 A task config holds ``scenario`` (a name of
-:data:`~marine_formation_env.scenarios.SCENARIOS`) and ``overrides`` (any
+``SCENARIOS``) and ``overrides`` (any
 ``parallel_env`` keyword); an unknown key or a bad value is refused by name
 when the env is built. BenchMARL's default loggers include wandb, which
 needs an account: ``experiment.loggers=[csv]`` (or ``[tensorboard]``) keeps
@@ -163,7 +163,7 @@ class MarineFormationClass(TaskClass):
 
 
 class MarineFormationTask(Task):
-    """The ``marine_formation`` tasks (configs in :data:`CONFIG_DIR`; see the module docstring)."""
+    """The ``marine_formation`` tasks (configs in ``CONFIG_DIR``; see the module docstring)."""
 
     PAPER_SPEED = None
     PAPER_GUIDANCE = None

@@ -24,7 +24,7 @@ Timing (everything happens at the control instants ``t_k = k·dt``):
    ``S = tdma_slot/dt``, so each vessel updates every ``n·tdma_slot`` seconds.
 3. **Loss.** A message from ``i`` reaches ``j`` only if the link exists at
    sending and survives an independent loss draw per link and message:
-   Bernoulli(``loss``), or the Gilbert–Elliott chain of :class:`GilbertElliott`
+   Bernoulli(``loss``), or the Gilbert–Elliott chain of ``GilbertElliott``
    (one chain per link, advanced once per message sent on it).
 4. **Latency.** A message is time-stamped at sending, ``t_s = t_k``; it arrives
    ``latency + jitter·U`` seconds later (``U ~ Uniform[0, 1)``) and is
@@ -36,14 +36,14 @@ Timing (everything happens at the control instants ``t_k = k·dt``):
    t_k − t_s)`` where ``link = 1`` iff the link exists now *and* has delivered
    at least one message since reset; otherwise the slot is all zeros.
 
-With the default :class:`ChannelConfig` nothing of this runs and the
+With the default ``ChannelConfig`` nothing of this runs and the
 observations are those of the ideal links; with a configuration that exists
 but does not impair (zero loss, zero latency, every period, unlimited range)
 the channel path reproduces them bit for bit (tests/test_channel.py).
 
 Randomness comes only from the channel stream of each formation, separate
-from its initial-state generator (:mod:`marine_formation_env.streams`).
-:class:`LinkChannel` takes only what it uses: its :class:`ChannelConfig`, the
+from its initial-state generator (``marine_formation_env.streams``).
+``LinkChannel`` takes only what it uses: its ``ChannelConfig``, the
 number of vessels, the control period, the graph schedule and the episode
 length.
 """
@@ -89,7 +89,7 @@ class GilbertElliott:
     Before each message on a link the chain moves good → bad with probability
     ``p_good_to_bad`` and bad → good with ``p_bad_to_good``; the message is then
     lost with ``loss_good`` or ``loss_bad``. The chain starts in its stationary
-    distribution, so the long-run loss rate is :attr:`mean_loss` from the first
+    distribution, so the long-run loss rate is ``mean_loss`` from the first
     message on, and a bad spell lasts ``1/p_bad_to_good`` messages on average.
 
     Attributes:
@@ -130,7 +130,7 @@ class ChannelConfig:
         loss: Bernoulli loss probability per link and message, in [0, 1]; or
             an ``(n, n)`` matrix of them, ``loss[j][i]`` for the link i → j.
         burst: Gilbert–Elliott bursty loss instead of ``loss`` (a
-            :class:`GilbertElliott` or a mapping of its fields); None: Bernoulli.
+            ``GilbertElliott`` or a mapping of its fields); None: Bernoulli.
         latency: fixed delay from sending to arrival [s], ≥ 0.
         jitter: random extra delay, uniform in [0, jitter) [s], ≥ 0.
         period: each vessel transmits every ``period`` seconds (a multiple of
@@ -227,7 +227,7 @@ class ChannelConfig:
 
 
 class LinkChannel:
-    """The channel state of ``B`` formations of ``N`` vessels, held by :class:`~.core.FormationCore`.
+    """The channel state of ``B`` formations of ``N`` vessels, held by ``FormationCore``.
 
     Arrays are indexed ``[b, j, i]`` for the link ``i → j`` (receiver ``j``,
     sender ``i``), like ``A[j, i]`` of the graph. The pending ring buffer has
@@ -246,7 +246,7 @@ class LinkChannel:
             messages on their way, by arrival slot ``step mod depth``
             (formation-major: one formation's messages are adjacent in memory).
         next_arrival: ``(B,)`` the first control period at which one of them
-            arrives (:data:`NEVER`: none on its way).
+            arrives (``NEVER``: none on its way).
         graphs, ends: the schedule's adjacencies ``(G, N, N)`` and the end of
             each dwell within one cycle [s].
         tdma, every: TDMA on; control periods per slot (TDMA) or per transmission.
@@ -314,7 +314,7 @@ class LinkChannel:
         return 1 + int(ch.failure_rate > 0 or ch.recovery_rate > 0) + int(ch.burst is not None) + int(ch.jitter > 0)
 
     def seed(self, b: int, generator: np.random.Generator) -> None:
-        """Give formation ``b`` a new stream of uniforms (the first of :func:`channel_streams`)."""
+        """Give formation ``b`` a new stream of uniforms (the first of ``channel_streams``)."""
         self.uniforms.seed(b, generator)
 
     def draws_at(self, transmitting: np.ndarray) -> np.ndarray:
@@ -332,7 +332,7 @@ class LinkChannel:
 
     def _instant_uniforms(self, ids: np.ndarray, transmitting: np.ndarray) -> np.ndarray:
         """``(draws_per_link, len(ids), N, N)``: a row of uniforms for each formation that draws
-        (:meth:`draws_at`); the others' entries are never read (nothing is sent, no link can fail)."""
+        (``draws_at``); the others' entries are never read (nothing is sent, no link can fail)."""
         need = self.draws_at(transmitting)
         if need.all():
             return self._uniforms(ids)
@@ -455,7 +455,7 @@ class LinkChannel:
         """After the arrivals at ``steps``: the next instant at which a message of each formation arrives.
 
         A message in slot ``s`` arrives at ``step + ((s − step) mod depth)``
-        (its delay is shorter than ``depth``); :data:`NEVER` when none is on
+        (its delay is shorter than ``depth``); ``NEVER`` when none is on
         its way. The compiled channel reads only this ``(B,)`` array at
         instants without arrivals, not the formation's ring of slots.
         """

@@ -4,12 +4,12 @@ Standard library only, so the core package stays light; the CLIs in
 ``baselines`` and ``training`` import from here (and never from each other's
 entry points).
 
-* :func:`parse_overrides` reads ``--set KEY=VALUE`` items (values are
+* ``parse_overrides`` reads ``--set KEY=VALUE`` items (values are
   Python/JSON literals, anything else a string; ``PARENT.FIELD=VALUE`` nests).
-* :class:`ArgumentParser` reports a bad argument as one line,
+* ``ArgumentParser`` reports a bad argument as one line,
   ``prog: error: <message>``, and exits with status 2 (argparse's usual code),
   without the usage block and without a traceback.
-* :func:`int_at_least` builds argparse ``type=`` checks such as ``--seed ≥ 0``.
+* ``int_at_least`` builds argparse ``type=`` checks such as ``--seed ≥ 0``.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def parse_overrides(items: Sequence[str], nest: bool = True) -> dict[str, Any]:
 
     ``true``/``false``/``null``/``none`` (any case) read as ``True``/``False``/``None``.
     ``PARENT.FIELD=VALUE`` collects into ``{PARENT: {FIELD: VALUE}}``, which
-    :func:`~marine_formation_env.scenarios.make_config` merges into the
+    ``make_config`` merges into the
     scenario's setting field by field; ``nest=False`` keeps dotted keys as
     they are (for configs that resolve dots themselves, as ``training.train``).
 

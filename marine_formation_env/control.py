@@ -29,7 +29,7 @@ import numpy as np
 from marine_formation_env.dynamics import accelerations, wrap_angle
 from marine_formation_env.params import Gains, VesselParams
 
-#: ``(a_u, v̇, a_r)`` as returned by :func:`~marine_formation_env.dynamics.accelerations`.
+#: ``(a_u, v̇, a_r)`` as returned by ``accelerations``.
 Accelerations = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 __all__ = [
@@ -142,7 +142,7 @@ def yaw_law(
 ) -> np.ndarray:
     """Yaw acceleration input τ_r [rad/s²] of (13): gives ``ṙ = ṙ_d − k_r·(r − r_d)``.
 
-    ``acc`` are :func:`~marine_formation_env.dynamics.accelerations` of the
+    ``acc`` are ``accelerations`` of the
     state, if already computed.
     """
     _, _, a_r = accelerations(p, u, v, r) if acc is None else acc
@@ -254,7 +254,7 @@ def heading_tracking_inputs(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Surge (11) and yaw (13) loops tracking ``u_c`` (with rate ``u̇_c``) and a held heading ``ψ_d``.
 
-    The arguments are in the order of :func:`path_following_inputs`, with the
+    The arguments are in the order of ``path_following_inputs``, with the
     heading command ``ψ_d`` where that has the cross-track error ``e``.
 
     Returns:
@@ -285,12 +285,12 @@ def turn_sway(p: VesselParams, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _sway_coupling(p: VesselParams, u: Any) -> Any:
-    """X(u) of :meth:`VesselParams.sway_coupling`, on the fields only (the compiled kernel's vessel is a tuple)."""
+    """X(u) of ``VesselParams.sway_coupling``, on the fields only (the compiled kernel's vessel is a tuple)."""
     return ((p.m23**2 - p.m11 * p.m33) * u + p.m23 * p.d33 - p.m33 * p.d23) / p.lam
 
 
 def _sway_damping(p: VesselParams, u: Any) -> Any:
-    """Y(u) of :meth:`VesselParams.sway_damping`, on the fields only."""
+    """Y(u) of ``VesselParams.sway_damping``, on the fields only."""
     return ((p.m22 - p.m11) * p.m23 * u - (p.m33 * p.d22 - p.m23 * p.d32)) / p.lam
 
 
@@ -302,7 +302,7 @@ def lane_speed(
     In steady turning on lane ``D_y`` (``e = 0``) at projection speed ``w``,
     the vessel turns at ``r = κ·w`` and moves along its lane at
     ``U = (1 − κ·D_y)·w`` (faster on the outer lane), with the sway
-    ``v = q(u)·r`` of :func:`turn_sway`; so its surge speed solves
+    ``v = q(u)·r`` of ``turn_sway``; so its surge speed solves
     ``u² + (q(u)·κ·w)² = U²``. Three fixed-point steps
     ``u ← U − v²/(U + √(U² − v²))`` solve it (``q`` varies slowly with u).
     The rate follows from differentiating that relation with κ constant
@@ -375,7 +375,7 @@ def curved_path_following_inputs(
         r_d = ψ̇_LOS − k_ψ·(ψ − ψ_LOS),   ṙ_d = ψ̈_LOS − k_ψ·(r − ψ̇_LOS)
 
     and ψ_LOS is further corrected by the crab angle of steady turning
-    (:func:`turn_crab`), whose rate enters ψ̇_LOS; its second derivative
+    (``turn_crab``), whose rate enters ψ̇_LOS; its second derivative
     (which would need v̈, hence ṙ) is left out of ψ̈_LOS: it vanishes in steady
     turning and on straight parts, and only the transients feel it. With
     ``κ = 0`` these are (12)-(14) of the straight path (docs/model.md §3).
@@ -408,7 +408,7 @@ def turn_crab(
     """The crab angle of steady turning at the path's rate, ``atan(q(u)·κ·ℓ̇/u)`` [rad], and its rate.
 
     A vessel turning with the path (``r = κ·ℓ̇``) sways at ``v = q(u)·r``
-    (:func:`turn_sway`), so its velocity points ``atan(v/u)`` off its heading;
+    (``turn_sway``), so its velocity points ``atan(v/u)`` off its heading;
     LOS on a curved path adds minus this angle to ψ_LOS, or it would settle
     ``Δ·v/u`` off the lane (docs/paths.md, "LOS on a curved path"). Zero on
     straight parts. ``u`` below 0.5 m/s is taken as 0.5 m/s.
@@ -439,7 +439,7 @@ def curved_heading_inputs(
     The desired heading ``ψ_d = γ(ℓ) + β_d`` turns with the path
     (``ψ̇_d = κ·ℓ̇``), so ``r_d = κ·ℓ̇ − k_ψ·(β − β_d)`` and
     ``ṙ_d = κ·ℓ̈ − k_ψ·(r − κ·ℓ̇)``; with ``κ = 0`` this is
-    :func:`heading_tracking_inputs` with a held ψ_d.
+    ``heading_tracking_inputs`` with a held ψ_d.
     """
     acc = accelerations(p, u, v, r) if acc is None else acc
     a_u, v_dot, _ = acc

@@ -1,19 +1,19 @@
 """The sea around the vessels: ocean currents and sensor noise (our extensions of the paper).
 
-* :class:`Current`: an inertial, irrotational current that carries the vessels
-  (``η̇ = R(ψ)·ν_r + V_c``, :func:`~marine_formation_env.dynamics.vessel_derivatives`),
+* ``Current``: an inertial, irrotational current that carries the vessels
+  (``η̇ = R(ψ)·ν_r + V_c``, ``vessel_derivatives``),
   constant or slowly varying in magnitude. The paper's controllers do not know
   it: the built-in LOS path follower then settles with a steady cross-track
-  error, which integral LOS removes (:class:`baselines.ReferencePolicy` with
+  error, which integral LOS removes (``baselines.ReferencePolicy`` with
   ``integral_los``; Børhaug, Pavlov and Pettersen, "Integral LOS control for
   path following of underactuated marine surface vessels in the presence of
   constant ocean currents", CDC 2008).
-* :class:`SensorNoise`: zero-mean Gaussian noise on what a vessel measures of
+* ``SensorNoise``: zero-mean Gaussian noise on what a vessel measures of
   itself: its own observation and the data it transmits. The built-in inner
   loops of the ``speed`` and ``guidance`` levels act continuously on the true
   state; only what the policy sees is noisy.
 
-Both are fields of :class:`~marine_formation_env.settings.Settings`
+Both are fields of ``Settings``
 (``current=…``, ``sensor_noise=…``; mappings are accepted).
 """
 
@@ -67,7 +67,7 @@ class Current:
 
     @property
     def coefficients(self) -> tuple[float, float, float, float, float]:
-        """``(speed, amplitude, ω, cos β, sin β)`` for :func:`~marine_formation_env.dynamics.current_velocity`."""
+        """``(speed, amplitude, ω, cos β, sin β)`` for ``current_velocity``."""
         return (
             float(self.speed),
             float(self.amplitude),
@@ -86,7 +86,7 @@ class SensorNoise:
     """Standard deviations of the Gaussian noise on a vessel's measurement of itself.
 
     Fresh, independent noise is drawn every control period from the
-    formation's stream of normals (:class:`SensorNoiseSource`). It enters the
+    formation's stream of normals (``SensorNoiseSource``). It enters the
     vessel's own observation and the (x, ẋ) it transmits.
 
     Attributes:
@@ -119,9 +119,9 @@ class SensorNoiseSource:
     """The sensor-noise draws of ``B`` formations of ``N`` vessels, held by the core.
 
     Each formation draws from its own generator of standard normals (the
-    second stream of :func:`~marine_formation_env.streams.channel_streams`),
+    second stream of ``channel_streams``),
     one row of ``6·N`` numbers per control instant, scaled by the standard
-    deviations of :class:`SensorNoise`.
+    deviations of ``SensorNoise``.
     """
 
     def __init__(self, noise: SensorNoise, n: int, num_envs: int) -> None:

@@ -7,7 +7,7 @@ accelerations ``τ_u`` [m/s²] and ``τ_r`` [rad/s²] with the leading shape of 
 state (the paper's ``M⁻¹Bu = [τ_u, 0, τ_r]ᵀ``).
 
 This is the only place where the equations of motion are written down; the
-controllers in :mod:`marine_formation_env.control` use :func:`accelerations`
+controllers in ``marine_formation_env.control`` use ``accelerations``
 for their feedback-linearizing terms, so the model and the model-based
 controller cannot drift apart.
 """
@@ -136,9 +136,9 @@ def vessel_rhs(
         state: ``(..., 6)`` array, columns ``x, y, psi, u, v, r``.
         tau_u: surge acceleration input [m/s²], shape ``state.shape[:-1]``.
         tau_r: yaw acceleration input [rad/s²], shape ``state.shape[:-1]``.
-        acc: :func:`accelerations` of this state, if already computed.
+        acc: ``accelerations`` of this state, if already computed.
         current: inertial current velocity ``(V_x, V_y)`` [m/s], broadcastable
-            to ``state.shape[:-1]`` (see :func:`vessel_derivatives`); None: still water.
+            to ``state.shape[:-1]`` (see ``vessel_derivatives``); None: still water.
 
     Returns:
         ``(..., 6)`` array ``(ẋ, ẏ, ψ̇, u̇, v̇, ṙ)``.

@@ -1,4 +1,4 @@
-"""PettingZoo ParallelEnv: a one-formation view of :class:`~marine_formation_env.core.FormationCore`."""
+"""PettingZoo ParallelEnv: a one-formation view of ``FormationCore``."""
 
 from __future__ import annotations
 
@@ -127,7 +127,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     The paper's links are ideal; the paper is motivated by acoustic modems
     (errors, delay, little bandwidth) and shared radio channels. ``channel=``
-    (:class:`~marine_formation_env.channel.ChannelConfig` or a mapping)
+    (``ChannelConfig`` or a mapping)
     puts a channel between what vessels transmit and what the others observe:
     Bernoulli or Gilbert–Elliott loss per link, fixed plus random latency
     (messages are time-stamped; none is seen before it could have arrived),
@@ -143,7 +143,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 
     ## Paths
 
-    ``path=`` (:mod:`marine_formation_env.paths`; docs/paths.md) sets the
+    ``path=`` (``marine_formation_env.paths``; docs/paths.md) sets the
     reference path ``P(ℓ)``, ``ℓ`` its arc length, with tangent angle ``γ(ℓ)``
     and curvature ``κ(ℓ)``: a path object, a kind name, or a mapping with
     ``kind`` (``{"kind": "circle", "radius": 400.0}``; a mapping without
@@ -268,7 +268,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
     rest of the acoustic channel.
 
-    All fields of :class:`~marine_formation_env.settings.Settings`
+    All fields of ``Settings``
     are accepted; an unknown key raises.
 
     ## Version History
@@ -341,7 +341,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
                 (columns x, y, psi, u, v, r); ``{"channel_seed": int}`` seeds
                 the channel stream on its own (to vary the channel's luck with
                 the same initial state). Any other key is ignored with a
-                warning (:mod:`marine_formation_env.frontend`).
+                warning (``marine_formation_env.frontend``).
 
         Raises:
             TypeError: a seed that is not a whole number (numpy integers are
@@ -458,7 +458,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         return batch
 
     def _infos(self, out: StepOutput) -> dict[str, dict[str, Any]]:
-        """``{agent: info}`` in the per-vessel schema (:mod:`marine_formation_env.frontend`)."""
+        """``{agent: info}`` in the per-vessel schema (``marine_formation_env.frontend``)."""
         stacked = vessel_infos(out, self.core.time)
         return {agent: one_entry(stacked, (0, self._index[agent])) for agent in self.agents}
 
@@ -466,5 +466,5 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
 def parallel_env(
     scenario: str | ScenarioConfig = "paper", render_mode: str | None = None, **overrides: Any
 ) -> MarineFormationParallelEnv:
-    """Create the PettingZoo ParallelEnv (see :class:`MarineFormationParallelEnv`)."""
+    """Create the PettingZoo ParallelEnv (see ``MarineFormationParallelEnv``)."""
     return MarineFormationParallelEnv(scenario=scenario, render_mode=render_mode, **overrides)

@@ -1,9 +1,9 @@
 """The configuration error and the input checks shared by every module.
 
-:class:`ConfigError` is re-exported by :mod:`marine_formation_env.scenarios`,
+``ConfigError`` is re-exported by ``marine_formation_env.scenarios``,
 where most users meet it; it lives here so that the modules the scenario
-configuration is built from (:mod:`~marine_formation_env.channel`,
-:mod:`~marine_formation_env.disturbances`) can raise it too. The checks of
+configuration is built from (``channel``,
+``disturbances``) can raise it too. The checks of
 values a user passes at run time (seeds, actions, initial states) live here as
 well, so that every front end refuses the same input with the same message.
 Every message names the offending field and value.
@@ -40,7 +40,7 @@ class ConfigError(ValueError):
 class UnknownSettingError(ConfigError, TypeError):
     """A keyword that is not a scenario setting.
 
-    Also a :class:`TypeError` with Python's own wording ("got an unexpected
+    Also a ``TypeError`` with Python's own wording ("got an unexpected
     keyword argument 'x'"), which is what wrappers that probe optional
     keywords expect when a keyword is not supported (TorchRL's ``GymEnv``
     passes ``frameskip=`` and retries without it on exactly that error).
@@ -119,7 +119,7 @@ def checked_array(
     """A finite float64 array of one of ``shapes``; ``error`` naming ``name`` and the offending entry otherwise.
 
     Raises:
-        TypeError: not numeric (:func:`float_array`).
+        TypeError: not numeric (``float_array``).
         error: another shape (``hint`` describes the columns), or a non-finite entry.
     """
     arr = float_array(value, name)

@@ -8,8 +8,8 @@ code. This module holds those rules once; the front ends only lay them out.
 Infos (the same keys from ``reset()``, with zeros, as from ``step()``). They
 are flat, one number (or array) per key, because wrappers such as TorchRL's
 ``PettingZooWrapper`` turn every info entry into a tensor; the reward terms
-are ``reward_<term>`` (:data:`REWARD_INFO_KEYS`, read back by name with
-:func:`reward_terms`):
+are ``reward_<term>`` (``REWARD_INFO_KEYS``, read back by name with
+``reward_terms``):
 
 * **per vessel** (ParallelEnv ``infos[agent]``, vector env ``layout="agent"``
   entries): ``reward_cross_track``, ``reward_heading``, ``reward_coordination``,
@@ -30,7 +30,7 @@ Reset options (all optional):
 
 * ``initial_state``: ``(n, 6)`` array, columns ``x, y, psi, u, v, r``; the
   vector env also takes ``(B, n, 6)``. It must be finite and must not end the
-  episode at its first step (:func:`~marine_formation_env.scenarios.initial_state_problem`).
+  episode at its first step (``initial_state_problem``).
 * ``channel_seed``: a whole number ≥ 0 that seeds the channel stream on its
   own (the vector env also takes a list of B of them).
 
@@ -88,10 +88,10 @@ RESET_OPTIONS = ("initial_state", "channel_seed")
 
 
 def resolve_config(scenario: str | ScenarioConfig, overrides: Mapping[str, Any]) -> ScenarioConfig:
-    """The configuration a front end runs: a scenario name with overrides, or a ready :class:`ScenarioConfig`.
+    """The configuration a front end runs: a scenario name with overrides, or a ready ``ScenarioConfig``.
 
     Raises:
-        ConfigError: unknown scenario or override (:func:`make_config`).
+        ConfigError: unknown scenario or override (``make_config``).
         TypeError: overrides given together with a ready configuration.
     """
     if isinstance(scenario, ScenarioConfig):
@@ -114,7 +114,7 @@ def open_front_end(
     num_envs: int = 1,
 ) -> tuple[ScenarioConfig, dict[str, Any], FormationCore]:
     """What every front end's constructor does first: check ``render_mode`` against ``metadata["render_modes"]``,
-    resolve the configuration (:func:`resolve_config`), set ``render_fps`` for it (``render_speedup``), then build
+    resolve the configuration (``resolve_config``), set ``render_fps`` for it (``render_speedup``), then build
     the core. Returns the configuration, the instance's metadata (a copy of ``metadata`` with ``render_fps``) and
     the core.
 
@@ -250,7 +250,7 @@ class InitialStates:
         self._drawn_from = config  # the config draws use (set_spread)
 
     def set_spread(self, scale: float) -> None:
-        """Draw later initial states from :func:`~marine_formation_env.scenarios.spread_config` at ``scale``.
+        """Draw later initial states from ``spread_config`` at ``scale``.
 
         0: every formation starts in formation on its lanes; 1: the
         scenario's initial state and noise. A curriculum over the initial
@@ -354,7 +354,7 @@ class Rendering:
 
     Args:
         config: the scenario (the camera frames its workspace).
-        render_mode: ``"rgb_array"``, ``"human"`` or None (then :meth:`frame`
+        render_mode: ``"rgb_array"``, ``"human"`` or None (then ``frame``
             warns and returns None, as gymnasium's envs do).
         width: frame width in pixels (the height follows the workspace's shape).
     """

@@ -7,11 +7,11 @@ receives. Node ``k`` is *globally reachable* if it can be reached from every
 node by following edges; Proposition 2 needs at least one such node.
 
 People usually think in terms of links "i transmits to j"; use
-:meth:`CommGraph.from_links` for that, :meth:`CommGraph.from_edges` for the
-paper's convention, or :meth:`CommGraph.from_adjacency` for a matrix with
+``CommGraph.from_links`` for that, ``CommGraph.from_edges`` for the
+paper's convention, or ``CommGraph.from_adjacency`` for a matrix with
 ``A[j, i] = 1`` iff ``i ∈ A_j``.
 
-Presets (:func:`make_graph`), for any ``n ≥ 2`` unless noted; one-way links
+Presets (``make_graph``), for any ``n ≥ 2`` unless noted; one-way links
 unless the name ends in ``_bidirectional``:
 
 =========================  =====================================================
@@ -177,7 +177,7 @@ class CommGraph:
         return CommGraph(self.adjacency | self.adjacency.T, f"{self.name}_bidirectional")
 
     def require_globally_reachable(self) -> None:
-        """Raise :class:`GraphError` if no node is globally reachable."""
+        """Raise ``GraphError`` if no node is globally reachable."""
         if not self.has_globally_reachable_node:
             raise GraphError(
                 f"communication graph {self.name!r} (links i→j: {self.links}) has no globally "
@@ -215,7 +215,7 @@ def _random_graph(n: int, seed: int | None, p: float) -> CommGraph:
     return CommGraph(adj | extra, "random")
 
 
-#: Preset names accepted by :func:`make_graph`.
+#: Preset names accepted by ``make_graph``.
 GRAPH_PRESETS = (
     "paper",
     "chain",
@@ -235,7 +235,7 @@ def make_graph(name: str, n: int, seed: int | None = None, p: float = 0.2) -> Co
     """Build a preset graph (see the module docstring).
 
     Args:
-        name: one of :data:`GRAPH_PRESETS`.
+        name: one of ``GRAPH_PRESETS``.
         n: number of vessels (``paper`` needs 3).
         seed: seed of the ``random`` preset (ignored by the others).
         p: extra-link probability of the ``random`` preset.

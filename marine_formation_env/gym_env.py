@@ -1,14 +1,14 @@
 """Centralized single-agent view: one gymnasium Env controls the whole formation.
 
 ``gymnasium.make("MarineFormation-v1", **overrides)`` returns
-:class:`MarineFormationGymEnv`. It is the same simulation as the PettingZoo
-env (a one-formation view of :class:`~marine_formation_env.core.FormationCore`),
+``MarineFormationGymEnv``. It is the same simulation as the PettingZoo
+env (a one-formation view of ``FormationCore``),
 with everything joined:
 
 * observation ``Box((N·dim,), float32)``: the N vessels' *masked* observations
   concatenated in vessel order (vessel ``j`` occupies ``[j·dim, (j+1)·dim)``);
   the layout of each block is the table of
-  :class:`~marine_formation_env.env.MarineFormationParallelEnv`;
+  ``MarineFormationParallelEnv``;
 * action ``Box(-1, 1, (N·A,), float32)``: vessel ``j``'s action in
   ``[j·A, (j+1)·A)``, same maps as the ParallelEnv;
 * reward: the mean of the vessels' rewards (the shared team reward);
@@ -16,7 +16,7 @@ with everything joined:
   the vessel-averaged terms (they sum to the reward); ``time``,
   ``collision``, ``out_of_bounds`` and (``speed``, ``guidance``) the
   ``commanded_speed`` of each vessel complete the per-formation info schema of
-  :mod:`marine_formation_env.frontend`, also returned by ``reset()`` with zeros;
+  ``marine_formation_env.frontend``, also returned by ``reset()`` with zeros;
 * termination and truncation: as the ParallelEnv (whole formation).
 
 Because each block is masked by the graph, a centralized policy still receives
@@ -53,7 +53,7 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
 
     Args:
         scenario: scenario name (``**overrides`` as for ``parallel_env``), or a ready
-            :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
+            ``ScenarioConfig`` (no overrides).
         render_mode: ``"rgb_array"`` or ``"human"``.
         render_speedup: ``metadata["render_fps"]`` is ``render_speedup / dt``: real time at 1.
     """
@@ -77,11 +77,11 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._done = True
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
-        """Start an episode (seeding as :meth:`MarineFormationParallelEnv.reset`).
+        """Start an episode (seeding as ``MarineFormationParallelEnv.reset``).
 
         ``options={"initial_state": (n, 6)}`` sets the state exactly,
         ``options={"channel_seed": int}`` seeds the channel stream on its own;
-        bad input raises as there (:mod:`marine_formation_env.frontend`).
+        bad input raises as there (``marine_formation_env.frontend``).
         """
         request = read_reset(self.config, seed, options)  # every check before anything changes
         super().reset(seed=request.seeds[0])
@@ -124,5 +124,5 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._rendering.close()
 
     def _info(self, out: StepOutput) -> dict[str, Any]:
-        """The info in the per-formation schema (:mod:`marine_formation_env.frontend`)."""
+        """The info in the per-formation schema (``marine_formation_env.frontend``)."""
         return one_entry(formation_infos(out, self.core.time), (0,))

@@ -1,8 +1,8 @@
 """What a vessel observes: the layout of its observation vector and its bounds.
 
 The entries themselves are computed by the core with the rules of
-:mod:`marine_formation_env.rules`; this module says where each one sits
-(:class:`ObservationLayout`) and what range it can take (:func:`observation_bounds`).
+``marine_formation_env.rules``; this module says where each one sits
+(``ObservationLayout``) and what range it can take (``observation_bounds``).
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ MIN_CURVATURE_BOUND = 0.01
 class ObservationLayout:
     """Index arithmetic of the per-agent observation vector.
 
-    Vessel ``j``'s observation is its own part (:data:`~marine_formation_env.rules.OWN_FEATURES`)
-    followed by one slot (:data:`~marine_formation_env.rules.SLOT_FEATURES`) per
+    Vessel ``j``'s observation is its own part (``OWN_FEATURES``)
+    followed by one slot (``SLOT_FEATURES``) per
     other vessel ``i = (j + k + 1) mod N``, ``k = 0 … N−2``: ordered relative to
     ``j``, so one shared policy sees "the next vessel", "the one after" and so
     on in the same place for every vessel.
@@ -66,7 +66,7 @@ class ObservationLayout:
 
 
 def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Per-agent observation bounds ``(low, high)``, float32 (see :func:`observation_space`)."""
+    """Per-agent observation bounds ``(low, high)``, float32 (see ``observation_space``)."""
     cfg = config
     x_lo, x_hi, y_lo, y_hi = cfg.workspace
     d = cfg.formation

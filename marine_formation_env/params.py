@@ -9,7 +9,7 @@ with ``M = [[m11, 0, 0], [0, m22, m23], [0, m23, m33]]`` and
 ``D = [[d11, 0, 0], [0, d22, d23], [0, d32, d33]]`` in SI units (kg, kg·m,
 kg·m², kg/s, kg·m/s, kg·m²/s).
 
-The paper gives no numbers; the default set :data:`SUPPLY` is the supply
+The paper gives no numbers; the default set ``SUPPLY`` is the supply
 vessel of Fossen, Sagatun & Sørensen (1996), built from its published
 nondimensional (bis-system) data exactly as docs/model.md §2 describes, so the table in
 docs/model.md §2 is *computed* here and checked by the tests rather than typed in.

@@ -1,7 +1,7 @@
 """Reference paths: the paper's straight line, circles, waypoint routes and lawnmower surveys.
 
 The paper's vessels follow parallel straight lines. Survey formations run
-routes: long legs joined by turns. A :class:`Path` is a curve ``P(ℓ)``
+routes: long legs joined by turns. A ``Path`` is a curve ``P(ℓ)``
 parametrized by its arc length ``ℓ`` [m], with tangent angle ``γ(ℓ)`` [rad]
 and curvature ``κ(ℓ) = dγ/dℓ`` [1/m] (positive when the path turns left,
 towards +y of a path heading along +x). Vessel ``j`` follows the *lane*
@@ -18,19 +18,19 @@ straight line; a circle goes on turning), so ``P(ℓ)`` is defined for every
 ``ℓ``: vessels that start behind the route's first waypoint, as the paper's
 formation does, have well-defined path coordinates.
 
-All evaluations are batched: :meth:`Path.frame`, :meth:`Path.project` and
-:meth:`Path.closest` take arrays of any shape.
+All evaluations are batched: ``Path.frame``, ``Path.project`` and
+``Path.closest`` take arrays of any shape.
 
 Kinds (``path=`` takes an instance or a mapping with ``kind``, the way
 ``channel=`` takes one; ``--set path.radius=500`` on the command line):
 
 =============  ====================================================================
-``straight``   :class:`StraightPath`: the paper's path, ``P(ℓ) = (ℓ, 0)``
-``circle``     :class:`CirclePath`: a circle of ``radius`` [m] turning ``left`` or
+``straight``   ``StraightPath``: the paper's path, ``P(ℓ) = (ℓ, 0)``
+``circle``     ``CirclePath``: a circle of ``radius`` [m] turning ``left`` or
                ``right``, starting at the origin heading along +x
-``waypoints``  :class:`WaypointPath`: straight legs between ``waypoints`` joined by
+``waypoints``  ``WaypointPath``: straight legs between ``waypoints`` joined by
                circular arcs of ``turn_radius`` [m]
-``lawnmower``  :class:`LawnmowerPath`: ``legs`` parallel legs of ``leg_length`` [m],
+``lawnmower``  ``LawnmowerPath``: ``legs`` parallel legs of ``leg_length`` [m],
                ``spacing`` [m] apart, joined by turns of ``turn_radius`` [m]
 =============  ====================================================================
 """
@@ -63,7 +63,7 @@ __all__ = [
     "segment_project",
 ]
 
-#: Newton iterations of :meth:`Path.project` (each is exact on a line; on an arc
+#: Newton iterations of ``Path.project`` (each is exact on a line; on an arc
 #: of radius R the error after one is O(step³/R²): three are at rounding level
 #: for the distances a vessel moves in a control period).
 PROJECTION_ITERATIONS = 3
@@ -94,7 +94,7 @@ class Segments:
 
 
 class Path:
-    """A reference path ``P(ℓ)`` (module docstring). Subclasses define :meth:`_build`."""
+    """A reference path ``P(ℓ)`` (module docstring). Subclasses define ``_build``."""
 
     kind: ClassVar[str] = ""
 
@@ -135,7 +135,7 @@ class Path:
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (seg.start, seg.x0, seg.y0, seg.gamma0, seg.kappa))  # type: ignore[return-value]
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"kind": …, field: value, …}``: what :func:`make_path` takes back."""
+        """``{"kind": …, field: value, …}``: what ``make_path`` takes back."""
         out: dict[str, Any] = {"kind": self.kind}
         for f in dataclasses.fields(self):  # type: ignore[arg-type]
             value = getattr(self, f.name)
@@ -191,7 +191,7 @@ class Path:
     def closest(self, x: Any, y: Any) -> np.ndarray:
         """The arc length of the nearest point of the path to ``(x, y)``: a global search over the segments.
 
-        Used once per episode, at reset (afterwards :meth:`project` follows the
+        Used once per episode, at reset (afterwards ``project`` follows the
         projection continuously). On a circle the answer is within half a lap of
         the start, ``ℓ ∈ [−πR, πR)``.
         """
@@ -385,7 +385,7 @@ class LawnmowerPath(Path):
     towards +y (``first_turn="left"``) or −y, and alternate in direction. The
     legs are joined by turns of ``turn_radius``: two quarter circles and a
     straight of ``spacing − 2·turn_radius`` between them (a half circle when
-    ``spacing = 2·turn_radius``). It is the :class:`WaypointPath` through the
+    ``spacing = 2·turn_radius``). It is the ``WaypointPath`` through the
     legs' ends.
     """
 
@@ -417,7 +417,7 @@ class LawnmowerPath(Path):
             )
 
     def waypoint_path(self) -> WaypointPath:
-        """The equivalent :class:`WaypointPath`."""
+        """The equivalent ``WaypointPath``."""
         side = 1.0 if self.first_turn == "left" else -1.0
         points = [(0.0, 0.0)]
         for k in range(self.legs):
@@ -437,7 +437,7 @@ PATH_KINDS: dict[str, type[Path]] = {cls.kind: cls for cls in (StraightPath, Cir
 
 
 def make_path(spec: Any) -> Path:
-    """A :class:`Path` from a path, a kind name (its defaults), a mapping with ``kind``, or None (straight).
+    """A ``Path`` from a path, a kind name (its defaults), a mapping with ``kind``, or None (straight).
 
     Raises:
         ConfigError: unknown kind or field, or an invalid value (named).
@@ -498,7 +498,7 @@ def path_coordinates(
     guess: np.ndarray,
     current: tuple[Any, Any] | None = None,
 ) -> PathCoordinates:
-    """:class:`PathCoordinates` of vessels at ``(x, y, ψ, u, v)``, projecting from ``guess`` (:meth:`Path.project`).
+    """``PathCoordinates`` of vessels at ``(x, y, ψ, u, v)``, projecting from ``guess`` (``Path.project``).
 
     ``current``: ``(V_x, V_y)`` [m/s] to make ``ℓ̇`` over ground.
     """
@@ -523,7 +523,7 @@ def path_coordinates(
 def segment_frame(
     start: np.ndarray, x0: np.ndarray, y0: np.ndarray, gamma0: np.ndarray, kappa: np.ndarray, ell: float
 ) -> tuple[float, float, float, float]:
-    """``(x, y, γ, κ)`` of the path at one arc length ``ell`` (as :meth:`Path.frame`)."""
+    """``(x, y, γ, κ)`` of the path at one arc length ``ell`` (as ``Path.frame``)."""
     k = 0
     for m in range(1, start.shape[0]):
         if ell >= start[m]:
@@ -551,7 +551,7 @@ def segment_project(
     y: float,
     guess: float,
 ) -> float:
-    """The projection's arc length of one point, by Newton's method from ``guess`` (as :meth:`Path.project`)."""
+    """The projection's arc length of one point, by Newton's method from ``guess`` (as ``Path.project``)."""
     ell = guess
     for _ in range(PROJECTION_ITERATIONS):
         px, py, gamma, kap = segment_frame(start, x0, y0, gamma0, kappa, ell)

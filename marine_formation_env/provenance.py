@@ -1,7 +1,7 @@
 """Where a result comes from: the commit, the command and the machine.
 
 Every script that writes a result file (``baselines.evaluate --json``,
-``baselines.sweep``, the ``benchmarks`` scripts) puts :func:`provenance` into
+``baselines.sweep``, the ``benchmarks`` scripts) puts ``provenance`` into
 it under the key ``provenance``, so that a number in the documentation can be
 traced to the code that measured it, the command that regenerates it and the
 machine it ran on::

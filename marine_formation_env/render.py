@@ -98,7 +98,7 @@ def route_span(config: ScenarioConfig) -> tuple[float, float]:
 
 
 def route_box(config: ScenarioConfig) -> tuple[float, float, float, float]:
-    """``(x_min, x_max, y_min, y_max)`` [m]: the route of :func:`route_span` with its lanes and a margin."""
+    """``(x_min, x_max, y_min, y_max)`` [m]: the route of ``route_span`` with its lanes and a margin."""
     lo, hi = route_span(config)
     points = config.path.points(lo, hi)
     margin = float(np.max(np.abs(config.formation[:, 1]))) + 100.0
@@ -234,9 +234,9 @@ class FormationRenderer:
         """Draw ``state`` ``(n, 6)`` at ``time`` [s]; return ``(H, W, 3)`` uint8 unless human.
 
         ``links``: ``(n, n)`` booleans, ``links[j, i]`` iff the link i → j is up
-        now (:meth:`~marine_formation_env.core.FormationCore.links_up`); None:
+        now (``links_up``); None:
         every link of the graph. ``arc``: ``(n,)`` the vessels' projections on a
-        curved path (:attr:`~marine_formation_env.core.FormationCore.arc`); None:
+        curved path (``arc``); None:
         found by a global search at the first frame and followed from frame to
         frame (then render every few control periods, or the projection may
         jump between a route's legs).

@@ -3,9 +3,9 @@
 Every function here works on numbers and on numpy arrays alike (broadcasting),
 with no branch on values, so both backends call the *same* code:
 
-* the numpy path of :class:`~marine_formation_env.core.FormationCore` calls
+* the numpy path of ``FormationCore`` calls
   them on whole ``(B, N)`` arrays (vectorized);
-* the numba kernel (:mod:`marine_formation_env._numba`) registers them with
+* the numba kernel (``marine_formation_env._numba``) registers them with
   ``register_jitable`` and calls them on one vessel's scalars inside its
   fused loop.
 
@@ -14,8 +14,8 @@ observation slot) is therefore one edit here, and ``tests/test_backends.py``
 checks that the two backends still agree.
 
 Observation layout of vessel ``j`` (``OWN_SIZE + SLOT_SIZE·(N−1)`` entries):
-the own part (:data:`OWN_FEATURES`), then one slot (:data:`SLOT_FEATURES`) per
-other vessel, in the order of :meth:`~marine_formation_env.observations.ObservationLayout.slot_vessels`.
+the own part (``OWN_FEATURES``), then one slot (``SLOT_FEATURES``) per
+other vessel, in the order of ``slot_vessels``.
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ CROSS_TRACK, HEADING, SURGE, SWAY = (
 #: Offset inside the own part of the desired speed u_d.
 DESIRED_SPEED = OWN_FEATURES.index("desired_speed")
 #: Offsets inside the own part: the path's curvature at the vessel's projection, at
-#: :data:`LOOKAHEAD` further along the path, and the vessel's lane offset D_y.
+#: ``LOOKAHEAD`` further along the path, and the vessel's lane offset D_y.
 CURVATURE, CURVATURE_AHEAD, LANE_OFFSET = (
     OWN_FEATURES.index(name) for name in ("path_curvature", "path_curvature_ahead", "lane_offset")
 )
@@ -130,7 +130,7 @@ def bounded_cost(error: Any, sigma: float) -> Any:
 def cost_term(weight: float, error: Any, sigma: float, dt: float, fine_share: float, fine_scale: float) -> Any:
     """One tracking term of the step reward: ``−dt·w·[(1 − f)·c(e; σ) + f·c(e; s·σ)]``.
 
-    ``f`` is ``fine_share`` and ``s`` is ``fine_scale`` (:class:`RewardConfig`). With ``f = 0``
+    ``f`` is ``fine_share`` and ``s`` is ``fine_scale`` (``RewardConfig``). With ``f = 0``
     (the benchmark's reward) it is ``−dt·w·c(e; σ)``, and the fine cost is not computed.
     """
     cost = bounded_cost(error, sigma)

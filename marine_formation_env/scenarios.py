@@ -1,15 +1,15 @@
 """The scenario the simulation runs: typed, resolved and checked against the paper's assumptions.
 
-:func:`make_config` is the usual entry point: a named scenario plus keyword
-overrides (:mod:`marine_formation_env.settings`, what a user writes), resolved
-by :func:`resolve` into a :class:`ScenarioConfig` whose every field has its
-final type (a :class:`~marine_formation_env.graph.CommGraph`, a
-:class:`~marine_formation_env.params.VesselParams`, floats in SI units, …).
+``make_config`` is the usual entry point: a named scenario plus keyword
+overrides (``marine_formation_env.settings``, what a user writes), resolved
+by ``resolve`` into a ``ScenarioConfig`` whose every field has its
+final type (a ``CommGraph``, a
+``VesselParams``, floats in SI units, …).
 Resolution is a sequence of small named steps; each refuses a value that breaks
-the paper's assumptions with a :class:`ConfigError` that names it, so an
+the paper's assumptions with a ``ConfigError`` that names it, so an
 environment is never built from a configuration that silently breaks them.
 Every front end (the PettingZoo env, the gymnasium views, the vector env) is
-built from a :class:`ScenarioConfig`.
+built from a ``ScenarioConfig``.
 """
 
 from __future__ import annotations
@@ -108,9 +108,9 @@ def formation_offsets(pattern: str, n: int) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class ScenarioConfig:
-    """Everything that defines an episode, resolved; build it with :func:`make_config` or :func:`resolve`.
+    """Everything that defines an episode, resolved; build it with ``make_config`` or ``resolve``.
 
-    The fields are those of :class:`~marine_formation_env.settings.Settings`
+    The fields are those of ``Settings``
     (which documents each), with their final types.
 
     Attributes:
@@ -131,7 +131,7 @@ class ScenarioConfig:
         horizon: episode length [s].
         paper_as_printed: run (11) and (14) as printed.
         initial_state: ``(n, 6)`` read-only nominal initial state, in the
-            path's frame (:attr:`start_state` is the same in the inertial frame).
+            path's frame (``start_state`` is the same in the inertial frame).
         init_noise: half-widths of the initial-state noise.
         safety_distance: collision distance [m] (0: no check).
         workspace: ``(x_min, x_max, y_min, y_max)`` [m].
@@ -143,7 +143,7 @@ class ScenarioConfig:
         sensor_noise: the noise on each vessel's measurement of itself.
         topology_schedule: ``((dwell [s], graph), …)``, empty for a fixed graph.
         los_integral_gain: σ [m/s] of the speed level's integral LOS (0: plain LOS).
-        path: the reference path (:mod:`marine_formation_env.paths`).
+        path: the reference path (``marine_formation_env.paths``).
         corridor: on a curved path, the largest |e| [m] before a vessel is
             out of bounds (``inf`` on the straight path).
         observation_slots: slots per observation (≥ n − 1; beyond n − 1 empty).
@@ -189,9 +189,9 @@ class ScenarioConfig:
     def start_state(self) -> np.ndarray:
         """``(n, 6)`` read-only nominal initial state in the inertial frame (columns x, y, ψ, u, v, r).
 
-        :attr:`initial_state` carried from the path's frame: position
+        ``initial_state`` carried from the path's frame: position
         ``P(ℓ) + offset·n(ℓ)``, heading ``γ(ℓ) + relative heading``. On the
-        straight path the two frames coincide and this is :attr:`initial_state`.
+        straight path the two frames coincide and this is ``initial_state``.
         """
         return _readonly(path_to_inertial(self.path, self.initial_state))
 
@@ -249,10 +249,10 @@ class ScenarioConfig:
 
 
 def make_config(scenario: str = "paper", **overrides: Any) -> ScenarioConfig:
-    """Build a validated :class:`ScenarioConfig` from a scenario name and overrides.
+    """Build a validated ``ScenarioConfig`` from a scenario name and overrides.
 
     ``resolve(make_settings(scenario, **overrides))``: see
-    :func:`~marine_formation_env.settings.make_settings` for how overrides
+    ``make_settings`` for how overrides
     combine with a preset (a mapping for a nested setting updates it field by
     field; changing ``n_vessels`` switches to a generated formation).
 
@@ -478,7 +478,7 @@ def _resolve_path(
     command ``(1 − κ·D_yj)·w`` with ``w ∈ (u_d − a, u_d + a)``,
     ``(1 − κ·D_yj)·(u_d ± a)`` inside ``[U_min, U_max]`` for every ``u_d(t)``,
     the lower end computed with the sway of the turn as the lane's surge
-    command is (:func:`~marine_formation_env.control.lane_speed`; docs/paths.md,
+    command is (``lane_speed``; docs/paths.md,
     "The generalized assumption (19)").
     """
     try:
@@ -669,7 +669,7 @@ def initial_state_problem(config: ScenarioConfig, state: np.ndarray, noise: np.n
     max_speed, |r| > max_yaw_rate), or two vessels closer than the safety
     distance, terminate the formation before any policy acts: such a start is
     an error in the scenario, not an episode. ``noise`` (half-widths of the
-    columns, as :meth:`InitNoise.as_array`) widens each value to the range the
+    columns, as ``InitNoise.as_array``) widens each value to the range the
     reset can draw; the separation check uses the nominal positions (draws
     that bring two vessels too close are rejected at reset).
     """
@@ -725,7 +725,7 @@ def cross_track_errors(config: ScenarioConfig, state: np.ndarray) -> np.ndarray:
     """``(..., N)`` cross-track errors ``e_j`` [m] of inertial states ``(..., N, 6)``, by a global search on the path.
 
     For a start (or any state without history); the simulation follows the
-    projection continuously instead (:meth:`~marine_formation_env.paths.Path.project`).
+    projection continuously instead (``project``).
     """
     x, y, psi, u, v = (state[..., k] for k in range(5))
     found = path_coordinates(config.path, x, y, psi, u, v, config.path.closest(x, y))
@@ -798,7 +798,7 @@ def spread_config(config: ScenarioConfig, scale: float) -> ScenarioConfig:
 
 
 def sample_initial_states(config: ScenarioConfig, rngs: Sequence[np.random.Generator]) -> np.ndarray:
-    """One initial state per generator, ``(len(rngs), N, 6)`` (see :func:`sample_initial_state`)."""
+    """One initial state per generator, ``(len(rngs), N, 6)`` (see ``sample_initial_state``)."""
     if config.init_noise.is_zero:
         return np.broadcast_to(config.start_state, (len(rngs), config.n_vessels, 6)).copy()
     return np.stack([sample_initial_state(config, rng) for rng in rngs])
@@ -817,7 +817,7 @@ def _pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
-    """Rebuild a :class:`ScenarioConfig` from :meth:`ScenarioConfig.to_dict` (e.g. a JSON report's ``config``).
+    """Rebuild a ``ScenarioConfig`` from ``ScenarioConfig.to_dict`` (e.g. a JSON report's ``config``).
 
     ``config_from_dict(cfg.to_dict()).to_dict() == cfg.to_dict()`` for every
     valid configuration (tests/test_input_errors.py checks it on random input).
@@ -853,7 +853,7 @@ def config_from_dict(data: Mapping[str, Any]) -> ScenarioConfig:
 
 
 def _from_json(value: Any) -> Any:
-    """Inverse of :func:`_finite_json`: ``"inf"``/``"-inf"`` back to floats (names stay strings)."""
+    """Inverse of ``_finite_json``: ``"inf"``/``"-inf"`` back to floats (names stay strings)."""
     if isinstance(value, dict):
         return {k: v if k == "name" else _from_json(v) for k, v in value.items()}
     if isinstance(value, list):
@@ -881,7 +881,7 @@ def _readonly(arr: np.ndarray) -> np.ndarray:
 
 
 def _float_array(value: Any, name: str, shape: tuple[int, ...]) -> np.ndarray:
-    """:func:`~marine_formation_env.errors.checked_array` with every refusal a :class:`ConfigError`."""
+    """``checked_array`` with every refusal a ``ConfigError``."""
     try:
         return checked_array(value, name, [shape], ConfigError)
     except TypeError as err:

@@ -1,15 +1,15 @@
 """What a user writes: the settings of a scenario, the named presets, and overrides.
 
-:class:`Settings` is a plain record of every knob, in the units and forms a
+``Settings`` is a plain record of every knob, in the units and forms a
 user writes them (a preset name or an adjacency matrix for the graph, a number
-or a :class:`SpeedProfile` for the speed, mappings for the nested settings).
-It checks nothing by itself: :func:`marine_formation_env.scenarios.resolve`
-turns it into the typed :class:`~marine_formation_env.scenarios.ScenarioConfig`
+or a ``SpeedProfile`` for the speed, mappings for the nested settings).
+It checks nothing by itself: ``marine_formation_env.scenarios.resolve``
+turns it into the typed ``ScenarioConfig``
 the simulation runs, validating it against the paper's assumptions on the way.
 
-A *scenario* is a named set of settings (:data:`SCENARIOS`);
-:func:`make_settings` applies keyword overrides on top of one. Override keys
-are the field names of :class:`Settings`; an unknown key raises an error that
+A *scenario* is a named set of settings (``SCENARIOS``);
+``make_settings`` applies keyword overrides on top of one. Override keys
+are the field names of ``Settings``; an unknown key raises an error that
 lists the valid ones.
 """
 
@@ -58,7 +58,7 @@ PAPER_INITIAL_STATE = np.array(
     ]
 )
 
-#: Formation patterns (D_x, D_y) [m] for :func:`formation_offsets`.
+#: Formation patterns (D_x, D_y) [m] for ``formation_offsets``.
 FORMATIONS = ("paper", "v", "line_abreast", "column")
 
 ALONG_SPACING = 100.0  # [m] between rows of the generated formations
@@ -188,17 +188,17 @@ class RewardConfig:
 
     @property
     def tracking_weights(self) -> tuple[float, ...]:
-        """The tracking terms' weights w_k, in :data:`TRACKING_TERMS` order."""
+        """The tracking terms' weights w_k, in ``TRACKING_TERMS`` order."""
         return tuple(getattr(self, term) for term in TRACKING_TERMS)
 
     @property
     def tracking_sigmas(self) -> tuple[float, ...]:
-        """The tracking terms' scales σ_k, in :data:`TRACKING_TERMS` order."""
+        """The tracking terms' scales σ_k, in ``TRACKING_TERMS`` order."""
         return tuple(getattr(self, f"sigma_{term}") for term in TRACKING_TERMS)
 
     @property
     def fine_shares(self) -> tuple[float, ...]:
-        """Each tracking term's fine share, in :data:`TRACKING_TERMS` order (0 for a term not in ``fine_terms``)."""
+        """Each tracking term's fine share, in ``TRACKING_TERMS`` order (0 for a term not in ``fine_terms``)."""
         f = self.fine_share
         return tuple(f if term in self.fine_terms else 0.0 for term in TRACKING_TERMS)
 
@@ -217,17 +217,17 @@ class RewardConfig:
 class Settings:
     """Every setting of a scenario, as a user writes it (nothing is checked here).
 
-    Build it with :func:`make_settings` (a preset plus overrides);
-    :func:`~marine_formation_env.scenarios.resolve` checks it and returns the
-    :class:`~marine_formation_env.scenarios.ScenarioConfig` the simulation runs.
+    Build it with ``make_settings`` (a preset plus overrides);
+    ``resolve`` checks it and returns the
+    ``ScenarioConfig`` the simulation runs.
 
     Attributes:
         name: scenario name.
         n_vessels: number of vessels n ≥ 2.
         formation: ``(n, 2)`` desired offsets (D_x, D_y) [m], or a pattern name
-            (:data:`FORMATIONS`).
-        topology: communication graph: a preset name (:func:`make_graph`), a
-            :class:`CommGraph`, or an ``(n, n)`` adjacency matrix
+            (``FORMATIONS``).
+        topology: communication graph: a preset name (``make_graph``), a
+            ``CommGraph``, or an ``(n, n)`` adjacency matrix
             (``A[j, i] = 1`` iff i transmits to j).
         topology_schedule: switching topologies: a sequence of ``(dwell [s],
             graph)`` pairs (graphs as for ``topology``) that repeats
@@ -237,12 +237,12 @@ class Settings:
         topology_seed: seed of the ``random`` topology preset.
         allow_unreachable: accept a graph without a globally reachable node
             (consensus then is not guaranteed).
-        vessel: vessel parameter set (name or :class:`VesselParams`).
+        vessel: vessel parameter set (name or ``VesselParams``).
         gains: controller gains and consensus saturation ``a``.
-        u_d: desired formation speed [m/s] (number or :class:`SpeedProfile`).
+        u_d: desired formation speed [m/s] (number or ``SpeedProfile``).
         u_min, u_max: the controllability band (U_min, U_max) [m/s].
         action_level: ``force``, ``guidance`` or ``speed`` (docs/model.md §6).
-        dt: control period [s]; default depends on the level (:data:`ACTION_LEVELS`).
+        dt: control period [s]; default depends on the level (``ACTION_LEVELS``).
         substeps: RK4 steps per control period; default ``ceil(dt / 0.1)``.
         horizon: episode length [s]; truncation after ``round(horizon/dt)`` steps.
         paper_as_printed: run (11) and (14) exactly as printed (docs/model.md §3).
@@ -262,16 +262,16 @@ class Settings:
             terminates (the model is not meant for it). Must exceed u_max.
         max_yaw_rate: envelope of |r| [rad/s]; beyond it the formation terminates.
         reward: reward weights and scales.
-        channel: the communication channel (:class:`ChannelConfig`, or a
+        channel: the communication channel (``ChannelConfig``, or a
             mapping of its fields): loss, latency, update rate, TDMA, range,
             random link failures. The default is the paper's ideal links.
-        current: an ocean current (:class:`Current` or a mapping); its speed
+        current: an ocean current (``Current`` or a mapping); its speed
             plus amplitude must stay below u_min, or a vessel at the slowest
             allowed speed could not hold its path.
         sensor_noise: noise on each vessel's measurement of itself
-            (:class:`SensorNoise` or a mapping).
-        path: the reference path (:mod:`marine_formation_env.paths`): a
-            :class:`~marine_formation_env.paths.Path`, a kind name, or a
+            (``SensorNoise`` or a mapping).
+        path: the reference path (``marine_formation_env.paths``): a
+            ``Path``, a kind name, or a
             mapping with ``kind`` (``{"kind": "circle", "radius": 400.0}``);
             a mapping without ``kind`` updates the scenario's path field by
             field. Default: the paper's straight line.
@@ -347,7 +347,7 @@ _PAPER: dict[str, Any] = {
     "safety_distance": 0.0,
 }
 
-#: Named scenarios: defaults that :func:`make_config` starts from. Besides the
+#: Named scenarios: defaults that ``make_config`` starts from. Besides the
 #: paper's own, three presets put its scenario into the sea the paper is
 #: motivated by (numbers and reasons in docs/channel.md, "Presets"):
 #:
@@ -409,7 +409,7 @@ def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
 
     Overriding ``n_vessels`` away from the scenario's value without giving
     ``formation`` / ``initial_state`` switches to a generated ``v`` formation
-    and random initial states around its slots (:data:`GENERATED_INIT_NOISE`),
+    and random initial states around its slots (``GENERATED_INIT_NOISE``),
     with the default collision check (the ``paper`` scenario turns it off for
     its own initial state only).
 
@@ -421,7 +421,7 @@ def make_settings(scenario: str = "paper", **overrides: Any) -> Settings:
     replaces the scenario's fixed graph by the schedule.
 
     Raises:
-        ConfigError: unknown scenario; :class:`~marine_formation_env.errors.UnknownSettingError`
+        ConfigError: unknown scenario; ``UnknownSettingError``
             (a ``ConfigError`` and a ``TypeError``) for an unknown key.
     """
     if not isinstance(scenario, str) or scenario not in SCENARIOS:

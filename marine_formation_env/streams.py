@@ -1,10 +1,10 @@
 """Random streams of the sea and the links: one per formation, separate from the initial state's.
 
 Randomness comes only from these streams, one set per formation, seeded at
-reset by the front end (:func:`channel_streams`): a generator of uniforms for
+reset by the front end (``channel_streams``): a generator of uniforms for
 the channel (loss, delays, link failures) and one of normals for the sensor
 noise, both independent of ``np.random.default_rng(seed)``, the initial-state
-stream of the same seed. They are served in blocks (:class:`BlockStream`: one
+stream of the same seed. They are served in blocks (``BlockStream``: one
 generator call per formation every few steps), which changes the cost, not
 the numbers: a formation sees the same sequence whatever the batch size.
 """

@@ -1,7 +1,7 @@
 """Gymnasium VectorEnv over the batched core: many formations in one call.
 
 ``MarineFormationVectorEnv(num_envs=B, ...)`` steps ``B`` formations of the
-scenario at once with :class:`~marine_formation_env.core.FormationCore`. It is
+scenario at once with ``FormationCore``. It is
 the ``vector_entry_point`` of ``MarineFormation-v1``::
 
     envs = gymnasium.make_vec("MarineFormation-v1", num_envs=64, vectorization_mode="vector_entry_point",
@@ -21,7 +21,7 @@ Two layouts of the same simulation:
   vessels terminate, truncate and reset together. Infos are the ParallelEnv's
   per-agent infos, stacked over the ``B·N`` entries.
 
-Both info schemas are documented in :mod:`marine_formation_env.frontend`.
+Both info schemas are documented in ``marine_formation_env.frontend``.
 
 Formation ``b`` is seeded with ``seed + b`` (``reset(seed=int)``) or
 ``seed[b]`` (a list of B seeds), so it reproduces a single
@@ -72,13 +72,13 @@ class MarineFormationVectorEnv(VectorEnv):
     Args:
         num_envs: number of formations B.
         scenario: scenario name (``**overrides`` as for ``parallel_env``), or a ready
-            :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
+            ``ScenarioConfig`` (no overrides).
         layout: ``"joint"`` (an entry per formation) or ``"agent"`` (per vessel).
-        autoreset_mode: :class:`gymnasium.vector.AutoresetMode` ``NEXT_STEP``
+        autoreset_mode: ``gymnasium.vector.AutoresetMode`` ``NEXT_STEP``
             or ``SAME_STEP`` (or their string values).
         render_mode: ``"rgb_array"`` renders formation 0.
         render_speedup: ``metadata["render_fps"]`` is ``render_speedup / dt``: real time at 1.
-        backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see :class:`~marine_formation_env.core.FormationCore`).
+        backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see ``FormationCore``).
     """
 
     metadata: dict[str, Any] = {  # noqa: RUF012 - gymnasium reads it from the class
@@ -136,7 +136,7 @@ class MarineFormationVectorEnv(VectorEnv):
                 streams on their own (``+ b`` per formation, like ``seed``).
                 Seeds are whole numbers ≥ 0 (Python or numpy integers); bad
                 values raise and other keys are ignored with a warning, as in
-                the ParallelEnv (:mod:`marine_formation_env.frontend`).
+                the ParallelEnv (``marine_formation_env.frontend``).
         """
         request = read_reset(self.config, seed, options, self.num_formations)  # every check before anything changes
         self._initial.seed(request.seeds)
@@ -226,7 +226,7 @@ class MarineFormationVectorEnv(VectorEnv):
         return mask if self.layout == "joint" else np.repeat(mask, self.n_vessels)
 
     def _infos(self, out: StepOutput) -> dict[str, Any]:
-        """Infos in the schema of :mod:`marine_formation_env.frontend`, stacked over the entries."""
+        """Infos in the schema of ``marine_formation_env.frontend``, stacked over the entries."""
         if self.layout == "joint":
             return formation_infos(out, self.core.time)
         return _flatten_entries(vessel_infos(out, self.core.time))
