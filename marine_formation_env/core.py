@@ -55,7 +55,6 @@ message (module :mod:`marine_formation_env.channel`). With a current, ``u`` and
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -87,7 +86,7 @@ from marine_formation_env.dynamics import (
     vessel_rhs,
     wrap_angle,
 )
-from marine_formation_env.errors import ConfigError, checked_array, float_array
+from marine_formation_env.errors import checked_array, float_array
 from marine_formation_env.observations import ObservationLayout, observation_bounds
 from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.rules import (
@@ -107,7 +106,7 @@ from marine_formation_env.rules import (
     terminal_term,
 )
 from marine_formation_env.scenarios import ScenarioConfig, min_separation
-from marine_formation_env.settings import TRACKING_TERMS, RewardConfig
+from marine_formation_env.settings import TRACKING_TERMS
 from marine_formation_env.streams import channel_streams
 
 __all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
@@ -262,23 +261,6 @@ class FormationCore:
         """``(B, N, 6)``: what each vessel measured of itself at the last control
         instant: the state plus sensor noise (the state itself without noise)."""
         return self.state if self._measured is None else self._measured
-
-    def set_reward(self, reward: RewardConfig) -> None:
-        """Charge the following steps with ``reward`` instead of the scenario's reward.
-
-        Nothing else changes: the dynamics, observations and terminations are
-        the scenario's, and formations running keep running. For a learner
-        whose reward changes during training (``training.torchrl_ppo``'s
-        ``train_reward_switch``); ``config.reward`` is ``reward`` afterwards.
-
-        Raises:
-            ConfigError: ``reward`` is not a :class:`~marine_formation_env.settings.RewardConfig`.
-        """
-        if not isinstance(reward, RewardConfig):
-            raise ConfigError(f"set_reward needs a RewardConfig, got {reward!r}")
-        self.config = dataclasses.replace(self.config, reward=reward)
-        if self._kernel is not None:
-            self._kernel.set_reward(self.config)
 
     # ------------------------------------------------------------------ reset
     def seed_channel(self, seeds: Sequence[int | None], env_ids: np.ndarray | None = None) -> None:

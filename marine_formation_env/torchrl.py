@@ -71,7 +71,6 @@ from marine_formation_env.frontend import (
     vessel_infos,
 )
 from marine_formation_env.scenarios import ScenarioConfig
-from marine_formation_env.settings import RewardConfig
 
 try:
     import torch
@@ -264,18 +263,6 @@ class MarineFormationTorchEnv(EnvBase):
             ConfigError: ``scale`` is not a number in [0, 1].
         """
         self._initial.set_spread(scale)
-
-    def set_reward(self, reward: RewardConfig) -> None:
-        """Charge the following steps with ``reward`` (:meth:`FormationCore.set_reward
-        <marine_formation_env.core.FormationCore.set_reward>`); ``config.reward`` is ``reward`` afterwards.
-
-        For a reward that changes during training; formations running keep their episode.
-
-        Raises:
-            ConfigError: ``reward`` is not a :class:`~marine_formation_env.settings.RewardConfig`.
-        """
-        self.core.set_reward(reward)
-        self.config = self.core.config
 
     def _reset_mask(self, tensordict: TensorDictBase | None) -> np.ndarray | None:
         """The formations to restart, ``(B,)`` bool, from a ``"_reset"`` entry (root or group); None: all."""

@@ -8,7 +8,6 @@ promises; one-line CLI errors naming the bad value.
 
 from __future__ import annotations
 
-import csv
 import json
 import subprocess
 import sys
@@ -31,10 +30,7 @@ from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
-HEADER = (
-    "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread,smoothness,"
-    "reward_switched"
-)
+HEADER = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
 TINY = [
     "num_envs=4",
     "frames_per_batch=40",
@@ -156,11 +152,9 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
-        ("normalize_window=0", "normalize_window must be a whole number ≥ 1, got 0"),
         ("drop_inputs=age", "drop_inputs must be a list of observation entry names, got 'age'"),
         ("drop_inputs=['speed']", "drop_inputs must name distinct entries of ['cross_track_error'"),
         ("drop_inputs=['age', 'age']", "(repeated)"),
-        ("normalize_window=1000", "normalize_window = 1000 needs normalize_observations: true"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
         ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
@@ -185,23 +179,6 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
             "initial_state_curriculum.until must lie in (0, 1], got 0",
         ),
         ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
-        ("train_reward_switch={'after': 0.5}", "train_reward_switch must be null or a mapping with the keys after"),
-        (
-            "train_reward_switch={'after': 0, 'reward': {'fine_share': 0.3}}",
-            "train_reward_switch.after must lie in (0, 1), got 0",
-        ),
-        (
-            "train_reward_switch={'after': 1.0, 'reward': {'fine_share': 0.3}}",
-            "train_reward_switch.after must lie in (0, 1), got 1.0",
-        ),
-        (
-            "train_reward_switch={'after': 0.5, 'reward': {}}",
-            "train_reward_switch.reward must be a non-empty mapping of reward fields, got {}",
-        ),
-        (
-            "train_reward_switch={'after': 0.5, 'reward': {'fine_share': 2}}",
-            "reward.fine_share must be a share in [0, 1], got 2",
-        ),
         ("train_dt=0", "train_dt must be > 0, got 0"),
         ("train_dt=1000", "train_dt = 1000.0: horizon = 400.0 s must be at least one control period dt = 1000.0 s"),
     ],
@@ -230,31 +207,6 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
     _, config = load_torch_policy(out)
     assert "reward" not in config["env_kwargs"] and config["train_reward"]["coordination"] == 0.0
     assert trainer.training_env_kwargs(config)["reward"]["speed"] == 0.0
-
-
-def test_train_reward_switch_changes_the_learner_s_reward_once_at_its_fraction_of_the_budget(tmp_path, monkeypatch):
-    # the learner's reward is exactly 0 at first (every weight 0, no terminal penalty); from half the budget on
-    # the coordination term is back, and with 10 m of initial noise along the path it costs something
-    from marine_formation_env.torchrl import MarineFormationTorchEnv
-
-    rewards = record_calls(monkeypatch, MarineFormationTorchEnv, "set_reward")
-    out = tmp_path / "switched"
-    args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    zero = [f"train_reward.{k}=0.0" for k in TRACKING_TERMS]
-    for item in [*TINY, *zero, "train_reward.terminal_penalty=false"]:
-        args += ["--set", item]
-    assert main([*args, "--set", "train_reward_switch={'after': 0.5, 'reward': {'coordination': 1.0}}"]) == 0
-    # 80 frames in two iterations of 40: the switch comes after the first, once
-    assert len(rewards) == 1
-    assert rewards[0].coordination == 1.0 and rewards[0].cross_track == 0.0 and not rewards[0].terminal_penalty
-    with (out / "progress.csv").open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    assert [int(row["reward_switched"]) for row in rows] == [0, 1]
-    assert float(rows[0]["mean_reward"]) == 0.0 and float(rows[1]["mean_reward"]) < 0.0
-    _, config = load_torch_policy(out)
-    assert "reward" not in config["env_kwargs"]  # the evaluation's reward stays the benchmark's
-    cfg = resolve({"train_reward_switch": {"after": 0.25, "reward": {"fine_share": 0.3}}}, seed=0)
-    assert trainer.switched_reward(cfg).fine_share == 0.3
 
 
 def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
@@ -432,110 +384,6 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
         trainer._policy_network(7, 2, 3, [16], False, "tanh_normal", 0.3, None, "state_dependent", 0.5)
 
 
-@pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
-def test_the_temporal_smoothness_term_pulls_the_deterministic_actions_of_consecutive_observations_together(
-    distribution,
-):
-    # the term is the mean |Δμ| between paired observations: gradient steps on it alone (Adam, 0.01) must shrink
-    # it on the pairs it trains on, whatever the squashing; the loc's path is what moves, not the deviation's
-    torch.manual_seed(0)
-    actor = trainer._policy_network(7, 2, 3, [16], False, distribution, 0.3, None, "state_independent")
-    cfg = resolve({"distribution": distribution, "temporal_smoothness": 1.0, "minibatch_size": 64}, seed=0)
-    obs = 3.0 * torch.randn(4, 32, 3, 7)  # (formations, time, vessels, entries)
-    data = TensorDict(
-        {("vessel", "observation"): obs, ("next", "vessel", "observation"): obs + torch.randn(4, 32, 3, 7)},
-        batch_size=[4, 32],
-    )
-    optim = torch.optim.Adam(actor.parameters(), lr=1e-2)
-
-    def scale_parameters():
-        return [p for name, p in actor.named_parameters() if "scale" in name]
-
-    scale = [p.detach().clone() for p in scale_parameters()]
-    term = trainer._smoothness_term(actor, data, cfg, 0)
-    for _ in range(40):  # 20 passes over the 128 pairs, minimizing the term alone
-        optim.zero_grad()
-        term().backward()
-        optim.step()
-    first, last = float(term.distances[0]), float(term.distances[-1])
-    assert 0.0 < last < 0.25 * first, (first, last)
-    assert scale and all(torch.equal(p, q) for p, q in zip(scale, scale_parameters(), strict=True))
-
-
-def test_the_smoothness_term_joins_each_ppo_step_instead_of_taking_steps_of_its_own():
-    # a stand-in PPO loss (a quadratic in one weight) and a term on the same weight: 2 epochs × 4 minibatches
-    # are 8 optimizer steps with the term or without it, and the term is evaluated once in each
-    from training.smoothness import SmoothnessTerm
-
-    weight = torch.nn.Parameter(torch.ones(1, 2))
-    zero = torch.zeros(())
-
-    def ppo_loss(_batch):
-        return TensorDict({"loss_objective": (weight**2).sum(), "loss_critic": zero, "loss_entropy": zero}, [])
-
-    class Buffer:
-        def sample(self):
-            return None
-
-    cfg = {"epochs": 2, "frames_per_batch": 64, "minibatch_size": 16, "target_kl": None, "max_grad_norm": 1.0}
-    ppo_loss.parameters = lambda: [weight]  # type: ignore[attr-defined]
-
-    def optimizer_steps(term):
-        optim = torch.optim.SGD([weight], lr=0.01)
-        counted = []
-        step = optim.step
-        optim.step = lambda: counted.append(step())  # type: ignore[method-assign]
-        _, updates = trainer._ppo_epochs(ppo_loss, optim, Buffer(), cfg, term)
-        return updates, len(counted)
-
-    obs = torch.randn(40, 2)
-    term = SmoothnessTerm(lambda o: o @ weight.T, obs, obs + 1.0, 0.5, 16, np.random.default_rng(0))
-    steps = {"plain": optimizer_steps(None), "term": optimizer_steps(term)}
-    assert len(term.distances) == 8
-    assert steps["plain"] == steps["term"] == (8, 8)
-
-
-def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_on(tmp_path):
-    # the term is part of the PPO loss: the saved policy of a run with it differs from the same seed's run
-    # without it, which the same seed reproduces exactly (one machine, one build)
-    runs = {}
-    for name, weight in (("off", 0.0), ("again", 0.0), ("on", 5.0)):
-        out = tmp_path / name
-        args = ["--seed", "2", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-        for item in [*TINY, "distribution=normal", f"temporal_smoothness={weight}"]:
-            args += ["--set", item]
-        assert main(args) == 0
-        column = [row.split(",")[10] for row in (out / "progress.csv").read_text().splitlines()[1:]]
-        policy, _ = load_torch_policy(out)
-        runs[name] = (column, [p.detach().clone() for p in policy.actor.parameters()])
-    assert runs["off"][0] == ["", ""] and all(float(x) > 0 for x in runs["on"][0])
-    assert all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["again"][1], strict=True))
-    assert not all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["on"][1], strict=True))
-    with pytest.raises(trainer.TrainConfigError, match="temporal_smoothness"):
-        resolve({"temporal_smoothness": -1.0}, seed=0)
-
-
-@pytest.mark.parametrize(("pairs", "expected"), [(None, 64), (10, 10)])
-def test_the_smoothness_term_draws_temporal_smoothness_pairs_formation_steps_per_minibatch_step(pairs, expected):
-    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, None, "state_independent")
-    cfg = resolve({"temporal_smoothness": 1.0, "minibatch_size": 64, "temporal_smoothness_pairs": pairs}, seed=0)
-    obs = torch.randn(4, 32, 3, 7)  # 128 formation-steps of 3 vessels
-    data = TensorDict({("vessel", "observation"): obs, ("next", "vessel", "observation"): obs}, batch_size=[4, 32])
-    term = trainer._smoothness_term(actor, data, cfg, 0)
-    seen = []
-    net = term.mean
-    term.mean = lambda o: (seen.append(tuple(o.shape)), net(o))[1]
-    term()
-    assert seen == [(expected, 3, 7)] * 2  # the next observations and these, each a (pairs, vessels, entries) batch
-
-
-@pytest.mark.parametrize("pairs", [0, 2.5, "64", -3])
-def test_a_bad_temporal_smoothness_pairs_is_refused_by_name(pairs):
-    message = f"temporal_smoothness_pairs must be a whole number ≥ 1, got {pairs!r}"
-    with pytest.raises(trainer.TrainConfigError, match=message):
-        resolve({"temporal_smoothness_pairs": pairs}, seed=0)
-
-
 def test_an_unreadable_policy_file_is_named(tmp_path):
     (tmp_path / "policy.pt").write_bytes(b"not a torch file")
     with pytest.raises(ValueError, match="cannot load the policy"):
@@ -570,36 +418,6 @@ def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_
     expected = np.clip((every[2:7] - mean) / np.sqrt(var + 1e-8), -10, 10)
     np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-4)
     assert norm(torch.full((1, 4), 1e6)).max() == 10.0  # clipped
-
-
-@pytest.mark.parametrize("window", [1, 150, 400, 2000, 10**9])
-def test_a_running_norm_with_a_window_is_the_weighted_mean_and_variance_of_the_rows_it_remembers(window):
-    """Truth: numpy's weighted mean and (population) variance of every row seen, each row's weight being the
-    product of the factors by which the docstring's rule shrank the statistics after it: before a batch of b rows,
-    what is remembered (total weight c) counts as min(c, max(window − b, 0)). The prior is the two points ±1 of
-    weight 5e-5 each, as above. A window of 1 keeps only the last batch; 10⁹ never forgets (the plain norm)."""
-    rng = np.random.default_rng(2)
-    norm = running_norm(3, window)
-    rows = [np.ones((1, 3)), -np.ones((1, 3))]
-    weights = [5e-5, 5e-5]
-    for size, shift in [(40, 0.0), (100, 50.0), (7, -3.0), (120, 9.0), (60, 2.0)]:
-        batch = (rng.normal(shift, [1.0, 4.0, 0.2], (size, 3)) + np.array([0.0, 10.0, -1.0])).astype(np.float32)
-        remembered = sum(weights)
-        kept = min(remembered, max(window - size, 0)) / remembered
-        weights = [w * kept for w in weights] + [1.0] * size
-        rows.append(batch)
-        norm.update(torch.from_numpy(batch.reshape(size, 1, 3)))
-    every = np.concatenate(rows).astype(np.float64)
-    mean = np.average(every, axis=0, weights=weights)
-    var = np.average((every - mean) ** 2, axis=0, weights=weights)
-    np.testing.assert_allclose(norm.mean.numpy(), mean, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(norm.var.numpy(), var, rtol=1e-4)
-    assert float(norm.count) == pytest.approx(sum(weights), rel=1e-9)
-    if window == 1:  # only the last batch is left
-        np.testing.assert_allclose(norm.mean.numpy(), rows[-1].mean(0), rtol=1e-5, atol=1e-5)
-    # the prior and the first batch: 40 of 327 rows (12 %) when nothing is forgotten
-    first = sum(weights[:42]) / sum(weights)
-    assert first < 0.04 if window <= 150 else first == pytest.approx(40.0001 / 327.0001)
 
 
 def test_episode_returns_are_the_sums_of_each_vessel_s_rewards_between_done_flags():
@@ -677,24 +495,6 @@ def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_li
     evaluate(["--policy", str(out), "--episodes", "2", "--seed", "10000", "--json", str(report), "--quiet"])
     mean = json.loads(report.read_text())["policies"][str(out)]["summary"]["return"]["mean"]
     assert mean == pytest.approx(json.loads((out / "evaluation.json").read_text())["learned_return"], rel=1e-9)
-
-
-def test_normalize_window_reaches_the_actor_s_and_the_critic_s_statistics(tmp_path, monkeypatch):
-    """Two batches of 40 formation-steps of 3 vessels, 120 rows each: with a window of 150 the first batch is
-    remembered as 30 rows when the second arrives, so both norms count 150 rows (240 without the window)."""
-    built = {}
-    make_critic = trainer._critic_network
-
-    def keep(*args, **kwargs):
-        built["critic"] = make_critic(*args, **kwargs)
-        return built["critic"]
-
-    monkeypatch.setattr(trainer, "_critic_network", keep)
-    windowed = ("eval_episodes=1", "normalize_observations=true", "normalize_window=150")
-    policy, config = _train_tiny(tmp_path / "run", *windowed)
-    assert config["normalize_window"] == 150
-    assert float(policy.trunk[0].count) == pytest.approx(150, abs=1e-3)
-    assert float(built["critic"].module[0].count) == pytest.approx(150, abs=1e-3)
 
 
 def test_drop_inputs_and_predicted_inputs_are_refused_together(tmp_path, capsys):

@@ -32,10 +32,7 @@ slots``, :mod:`training.slot_policy`, with ``normalize: {norm_obs: false}``).
 the learner trains on and nothing else, as in :mod:`training.torchrl_ppo`:
 ``train_reward: {sigma_cross_track: 5.0, sigma_coordination: 5.0}`` trains
 every team on 5 m scales, while evaluations, checkpoints' headers and exports
-keep ``env_kwargs``'s reward, the benchmark's. ``action_change_penalty`` (a
-weight w ≥ 0 in 1/s, default 0: none) charges the learner ``dt·w·mean|a_k −
-a_{k−1}|`` per vessel and period for changing its action
-(:class:`training.vec_env.ActionChangePenalty`), learner-side shaping as well.
+keep ``env_kwargs``'s reward, the benchmark's.
 ``algo: ppo`` is :class:`training.smoothness.SmoothPPO`, SB3's PPO with one more
 hyperparameter, ``temporal_smoothness`` (λ ≥ 0, default 0: PPO itself), a
 regularizer on the change of the policy's mean action between consecutive
@@ -108,7 +105,6 @@ SPECIAL_KEYS = {
     "teams": [],
     "train_reward": {},
     "initial_state_curriculum": None,
-    "action_change_penalty": 0.0,
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -430,9 +426,6 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     _check_teams(resolved)
     check_train_reward(resolved)
     resolved["initial_state_curriculum"] = check_curriculum(resolved["initial_state_curriculum"])
-    penalty = resolved["action_change_penalty"]
-    if not (_is_number(penalty) and math.isfinite(penalty) and penalty >= 0):
-        raise TrainConfigError(f"action_change_penalty must be a number >= 0, got {penalty!r}")
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
         _parse_schedule(lr)

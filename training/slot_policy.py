@@ -24,10 +24,6 @@ them as a set:
   hears many;
 * the features are ``[ψ(own), sum, mean]``; SB3's ``net_arch`` layers and
   action head follow, as for ``MlpPolicy``;
-* with ``speed_error = s`` [m/s] (default None: off) the own inputs gain one
-  entry, ``tanh((u − u_d)/s)``: the own speed error, which the fixed scales
-  above leave at 0.024 of an input for a 0.12 m/s offset (u and u_d are each
-  divided by 5 m/s), read steeply near 0 and bounded far from it;
 * with ``zero_at_agreement = True`` (default False) each message is measured
   from the message of a neighbour in agreement, ``m_k = φ([own, slot_k]) −
   φ([own, slot_k⁰])``, where ``slot_k⁰`` keeps the link bit and the age but
@@ -55,15 +51,13 @@ team of 20, whose observations have 19 slots. Config (``training.train``)::
 
 from __future__ import annotations
 
-import math
-
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import AGREEMENT_MASK, OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import DESIRED_SPEED, OWN_SIZE, SLOT_SIZE, SURGE, slot_count
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
 from training.inputs import predicted_inputs
 
 __all__ = ["SlotFeatures"]
@@ -76,13 +70,9 @@ class SlotFeatures(BaseFeaturesExtractor):
         self,
         observation_space: spaces.Box,
         hidden: int = 64,
-        speed_error: float | None = None,
         zero_at_agreement: bool = False,
     ) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
-        ok = isinstance(speed_error, int | float) and not isinstance(speed_error, bool) and 0 < speed_error < math.inf
-        if speed_error is not None and not ok:
-            raise ValueError(f"speed_error must be a speed scale > 0 [m/s] or None, got {speed_error!r}")
         if not isinstance(zero_at_agreement, bool):
             raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
@@ -90,27 +80,19 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.zero_at_agreement = zero_at_agreement
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
-        self.speed_error_scale: torch.Tensor
         self.agreement_mask: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
-        self.speed_error = None if speed_error is None else float(speed_error)
-        own_size = OWN_SIZE if speed_error is None else OWN_SIZE + 1
-        if self.speed_error is not None:  # a buffer only when on: networks saved without it still load strictly
-            self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
         if zero_at_agreement:  # not saved (persistent=False): it is a constant, and old state_dicts load strictly
             self.register_buffer("agreement_mask", torch.tensor(AGREEMENT_MASK, dtype=torch.float32), persistent=False)
         self.message = nn.Sequential(
-            nn.Linear(own_size + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
+            nn.Linear(OWN_SIZE + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
-        self.own = nn.Sequential(nn.Linear(own_size, hidden), nn.Tanh())
+        self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
         own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
-        if self.speed_error is not None:
-            error = observations[..., SURGE : SURGE + 1] - observations[..., DESIRED_SPEED : DESIRED_SPEED + 1]
-            own = torch.cat([own, torch.tanh(error / self.speed_error_scale)], dim=-1)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))

@@ -18,11 +18,10 @@ noise-free action. Both terms share one backward pass, one gradient
 clipping and one optimizer step, so λ weighs the term against PPO's own
 gradient.
 
-Unlike a cost on action changes in the learner's reward
-(:class:`training.vec_env.ActionChangePenalty`, which sees the sampled and
-clipped actions), this term does not charge the exploration noise and gives
-nothing for holding an action beyond the bounds of the action space; the
-reward, the returns the run logs and every evaluation are unchanged. The
+Unlike a cost on action changes in the learner's reward, this term does not
+charge the exploration noise and gives nothing for holding an action beyond
+the bounds of the action space; the reward, the returns the run logs and
+every evaluation are unchanged. The
 run's TensorBoard gets ``train/temporal_smoothness_loss`` (the mean distance
 over the update's steps, without λ).
 
@@ -33,9 +32,7 @@ size of the step: λ = 1 and λ = 0.1 collapsed the same run alike
 (docs/results.md).
 
 :class:`SmoothnessTerm` is the term itself, for any policy whose mean is a
-differentiable function of the observation; the TorchRL trainer
-(``training.torchrl_ppo``, key ``temporal_smoothness``) adds it to its PPO
-loss too.
+differentiable function of the observation.
 """
 
 from __future__ import annotations

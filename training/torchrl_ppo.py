@@ -37,15 +37,11 @@ nest; unknown keys and bad values are refused by name):
 | ``gamma``, ``lmbda`` | discount, GAE λ | 0.99, 0.95 |
 | ``clip_epsilon``, ``entropy_coef`` | PPO clip range, entropy bonus | 0.2, 1e-4 |
 | ``epochs``, ``minibatch_size`` | passes over each batch, formation-steps per minibatch | 4, 1600 |
-| ``temporal_smoothness`` | λ ≥ 0 of CAPS' temporal term on the policy's mean (below); 0: PPO itself | 0.0 |
-| ``temporal_smoothness_pairs`` | formation-step pairs of the term per minibatch (null: ``minibatch_size``) | null |
 | ``inputs`` | ``raw``, or ``predicted``: the networks read the slot network's fixed input map (below) | ``raw`` |
 | ``drop_inputs`` | observation entries the policy does not read (names; below) | ``[]`` |
 | ``normalize_observations``, ``normalize_advantage``, ``normalize_reward`` | see below | false |
-| ``normalize_window`` | vessel-observations the observation statistics remember (below), or null: all | null |
 | ``train_reward`` | reward weights and scales (fields of ``RewardConfig``) that only the training env uses | ``{}`` |
 | ``initial_state_curriculum`` | ``{start: s₀, until: f}``: the training env's initial errors grow (below) | null |
-| ``train_reward_switch`` | ``{after: f, reward: {…}}``: more reward fields from f of the budget on (below) | null |
 | ``train_dt`` | the learner's control period [s] (below), or null: the scenario's ``dt`` | null |
 | ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
 | ``threads`` | torch's intra-op threads (null: torch's default), as ``training.train --threads`` | 1 |
@@ -78,12 +74,7 @@ front of the actor and the critic; ``normalize_advantage`` standardizes the
 advantages of each minibatch; ``normalize_reward`` divides the rewards the
 critic and the advantages see by the running standard deviation of the
 discounted return (clipped to ±10). The env's reward, the logged
-``mean_reward`` and the evaluation are unchanged. ``normalize_window: W``
-makes the observation statistics forget: before each batch of ``b``
-vessel-observations is merged, the statistics so far count as at most
-``W − b`` observations (none once ``b ≥ W``), so they describe about the
-last ``W`` observations, an exponential moving average, instead of every
-observation since the start (SB3's ``RunningMeanStd``, the default).
+``mean_reward`` and the evaluation are unchanged.
 
 ``inputs: predicted`` puts the slot network's fixed input map
 (:mod:`training.inputs`, parameter-free) in front of the actor and the critic:
@@ -123,17 +114,6 @@ learned baselines keep the benchmark's reward. ``progress.csv``'s
 ``mean_reward`` and ``episode_return`` are then in the shaped reward, not
 comparable with the reference's return.
 
-``train_reward_switch: {after: f, reward: {…}}`` changes the learner's reward
-once during the run: after the iteration that spends the fraction ``f`` ∈ (0, 1)
-of the budget (below), the training env's reward is ``train_reward``'s with
-``reward``'s fields on top (``MarineFormationTorchEnv.set_reward``; formations
-running keep their episode). For example ``{after: 0.4, reward: {fine_share:
-0.3}}`` trains on the benchmark's broad scales until the formations hold
-together, then adds a slope near the goal. The evaluation keeps the benchmark's
-reward, as always; ``progress.csv``'s ``reward_switched`` is 1 for the batches
-collected with the switched reward, whose returns are in its units.
-``normalize_reward``'s running deviation carries over the switch.
-
 ``initial_state_curriculum`` is a curriculum over the initial state, in the
 learner's env only: before each iteration the training env draws its
 restarts ``s₀ + (1 − s₀) · min(1, used / f)`` of the way from the formation
@@ -154,18 +134,6 @@ evaluation, ``baselines.evaluate`` and the export run it at the scenario's own
 ``dt``, as every other policy. The reward is per second (``−dt·Σ w·c``), so
 returns stay comparable.
 
-``temporal_smoothness: λ`` is the term of SB3's ``algo: ppo``
-(:mod:`training.smoothness`): each minibatch's PPO loss gains ``λ · mean
-|μ(o') − μ(o)|`` over ``temporal_smoothness_pairs`` (default
-``minibatch_size``) formation-steps' worth of every vessel's pairs of an
-observation ``o`` and the next one ``o'`` of the same episode (the batch's
-``("next", "vessel", "observation")``, so the last observation of an
-episode still pairs with the one before it), μ the
-deterministic action before clipping: the Gaussian's mean in the env's units
-with ``distribution: normal``, ``tanh`` of it with ``tanh_normal``. Rewards,
-the logged returns and the evaluation are unchanged; ``progress.csv`` logs the
-mean distance over the batch's steps (``smoothness``, empty at λ = 0).
-
 With ``lr_schedule: linear`` the budget is whichever of ``minutes`` and
 ``total_frames`` runs out first: before each iteration the rate is
 ``lr · (1 − max(seconds / (60 · minutes), frames / total_frames))``, as SB3's linear
@@ -183,8 +151,8 @@ The run folder gets ``config.yaml`` (resolved, with the seed), ``policy.pt``
 ``progress.csv`` (per iteration: frames, vessel-steps, seconds, the mean
 training reward per vessel-step, the mean return per vessel of the training
 episodes that ended in the batch and their number (counted per vessel), the
-learning rate, the last approximate KL, the number of minibatch updates, the training env's
-initial-state spread for the next iteration and the ``temporal_smoothness`` distance) and
+learning rate, the last approximate KL, the number of minibatch updates and the training env's
+initial-state spread for the next iteration) and
 ``evaluation.json`` (the learned policy's and the reference's mean return over the same seeds). Every file is
 written atomically; ``policy.pt`` and ``progress.csv`` are also written once a
 minute during training (:data:`SAVE_SECONDS`), so a long run can be watched and
@@ -266,17 +234,13 @@ DEFAULTS: dict[str, Any] = {
     "entropy_coef": 1e-4,
     "epochs": 4,
     "minibatch_size": 1600,
-    "temporal_smoothness": 0.0,
-    "temporal_smoothness_pairs": None,
     "inputs": "raw",
     "drop_inputs": [],
     "normalize_observations": False,
     "normalize_advantage": False,
     "normalize_reward": False,
-    "normalize_window": None,
     "train_reward": {},
     "initial_state_curriculum": None,
-    "train_reward_switch": None,
     "train_dt": None,
     "eval_episodes": 4,
     "threads": 1,
@@ -308,20 +272,12 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg[key] = _positive(key, cfg[key])
     for key in ("gamma", "lmbda"):
         cfg[key] = _fraction(key, cfg[key])
-    for key in ("entropy_coef", "temporal_smoothness"):
-        cfg[key] = _non_negative(key, cfg[key])
+    cfg["entropy_coef"] = _non_negative("entropy_coef", cfg["entropy_coef"])
     for key in ("normalize_observations", "normalize_advantage", "normalize_reward"):
         if not isinstance(cfg[key], bool):
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
-    if cfg["normalize_window"] is not None:
-        cfg["normalize_window"] = _whole("normalize_window", cfg["normalize_window"], 1)
-        if not cfg["normalize_observations"]:
-            raise TrainConfigError(
-                f"normalize_window = {cfg['normalize_window']} needs normalize_observations: true (it is the"
-                " window of those statistics)"
-            )
     if cfg["inputs"] not in INPUTS:
         raise TrainConfigError(f"inputs must be one of {list(INPUTS)}, got {cfg['inputs']!r}")
     if cfg["inputs"] == "predicted" and cfg["normalize_observations"]:
@@ -342,8 +298,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg["target_kl"] = _positive("target_kl", cfg["target_kl"])
     if cfg["threads"] is not None:
         cfg["threads"] = _whole("threads", cfg["threads"], 1)
-    if cfg["temporal_smoothness_pairs"] is not None:
-        cfg["temporal_smoothness_pairs"] = _whole("temporal_smoothness_pairs", cfg["temporal_smoothness_pairs"], 1)
     if cfg["action_head_gain"] is not None:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
@@ -368,7 +322,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         )
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
-    cfg["train_reward_switch"] = _check_reward_switch(cfg)
     if cfg["train_dt"] is not None:
         cfg["train_dt"] = _positive("train_dt", cfg["train_dt"])
         try:
@@ -401,36 +354,6 @@ def _dropped(value: Any) -> list[str]:
     return value
 
 
-def _check_reward_switch(cfg: dict[str, Any]) -> dict[str, Any] | None:
-    """``train_reward_switch`` checked: null, or ``{after: (0, 1), reward: {reward fields}}`` (both keys)."""
-    key, value = "train_reward_switch", cfg["train_reward_switch"]
-    if value is None:
-        return None
-    if not isinstance(value, dict) or set(value) != {"after", "reward"}:
-        raise TrainConfigError(f"{key} must be null or a mapping with the keys after and reward, got {value!r}")
-    after = _fraction(f"{key}.after", value["after"])
-    if not 0.0 < after < 1.0:  # 0 is train_reward itself, 1 would never switch
-        raise TrainConfigError(f"{key}.after must lie in (0, 1), got {value['after']!r}")
-    if not isinstance(value["reward"], dict) or not value["reward"]:
-        raise TrainConfigError(f"{key}.reward must be a non-empty mapping of reward fields, got {value['reward']!r}")
-    checked = {"after": after, "reward": dict(value["reward"])}
-    try:
-        switched_reward({**cfg, key: checked})
-    except (ValueError, TypeError) as err:
-        raise TrainConfigError(f"{key}.reward {value['reward']}: {err}") from err
-    return checked
-
-
-def switched_reward(cfg: dict[str, Any]) -> Any:
-    """The learner's ``RewardConfig`` after ``train_reward_switch``: the scenario's reward with ``train_reward``'s
-    fields and then the switch's own on top."""
-    from marine_formation_env.scenarios import make_config
-
-    kwargs = learner_env_kwargs(cfg)
-    reward = {**kwargs.get("reward", {}), **cfg["train_reward_switch"]["reward"]}
-    return make_config(cfg["scenario"], **{**kwargs, "reward": reward}).reward
-
-
 def _action_scale(value: Any, size: int) -> float | list[float]:
     """``action_scale``: one number in (0, 1] or a list of ``size`` of them, one per action entry."""
 
@@ -449,7 +372,7 @@ def _action_scale(value: Any, size: int) -> float | list[float]:
 # ----------------------------------------------------------------------------- networks
 
 
-def running_norm(dim: int, window: int | None = None) -> Any:
+def running_norm(dim: int) -> Any:
     """A module ``x ↦ clip((x − mean) / sqrt(var + 1e-8), ±10)`` whose statistics are buffers.
 
     The statistics are pooled over every leading dimension (formations, time,
@@ -459,11 +382,6 @@ def running_norm(dim: int, window: int | None = None) -> Any:
     ``RunningMeanStd``), never in ``forward``: the trainer updates them after
     the PPO epochs on a batch, so a batch is trained with the statistics it
     was collected with. They are saved in the module's ``state_dict``.
-
-    With ``window`` (a count of rows, pooled as above) they forget: a batch of
-    ``b`` rows is merged with the statistics so far weighted as
-    ``min(count, max(window − b, 0))`` rows, so the count never exceeds
-    ``max(window, b)`` and the older rows' weight decays geometrically.
     """
     import torch
     from torch import nn
@@ -487,8 +405,6 @@ def running_norm(dim: int, window: int | None = None) -> Any:
             flat = x.reshape(-1, dim).double()
             n_new = flat.shape[0]
             mean_new, var_new = flat.mean(0), flat.var(0, unbiased=False)
-            if window is not None:
-                self.count.clamp_(max=max(window - n_new, 0))
             total = self.count + n_new
             delta = mean_new - self.mean.double()
             mean = self.mean.double() + delta * (n_new / total)
@@ -576,7 +492,6 @@ def _policy_network(
     scale: str = "state_dependent",
     action_scale: float | Sequence[float] = 1.0,
     inputs: str = "raw",
-    window: int | None = None,
     dropped: Sequence[str] = (),
 ) -> Any:
     """The shared actor: [input mask →] [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the
@@ -593,7 +508,7 @@ def _policy_network(
     With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
     the Gaussian over the network's units becomes one over the env's (module docstring).
     With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation;
-    with ``normalize`` its running norm, forgetting after ``window`` rows (:func:`running_norm`); with ``dropped``
+    with ``normalize`` its running norm (:func:`running_norm`); with ``dropped``
     an :class:`training.inputs.InputMask` of those entries first.
     """
     import math
@@ -611,7 +526,7 @@ def _policy_network(
         from training.inputs import InputMask
     net = nn.Sequential(
         *([InputMask(obs_dim, dropped)] if dropped else []),
-        *_input_modules(obs_dim, normalize, inputs, window),
+        *_input_modules(obs_dim, normalize, inputs),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=action_dim if scale == "state_independent" else 2 * action_dim,
@@ -676,14 +591,14 @@ def _action_units(units: np.ndarray) -> Any:
     return ActionUnits()
 
 
-def _input_modules(obs_dim: int, normalize: bool, inputs: str, window: int | None = None) -> list[Any]:
-    """What a network puts before its MLP: the running norm (forgetting after ``window`` rows), the fixed input map
+def _input_modules(obs_dim: int, normalize: bool, inputs: str) -> list[Any]:
+    """What a network puts before its MLP: the running norm, the fixed input map
     (``inputs: predicted``), or nothing."""
     if inputs == "predicted":
         from training.inputs import PredictedInputs
 
         return [PredictedInputs()]
-    return [running_norm(obs_dim, window)] if normalize else []
+    return [running_norm(obs_dim)] if normalize else []
 
 
 def _critic_network(
@@ -693,14 +608,13 @@ def _critic_network(
     centralized: bool,
     normalize: bool,
     inputs: str = "raw",
-    window: int | None = None,
 ) -> Any:
     from tensordict.nn import TensorDictModule
     from torch import nn
     from torchrl.modules import MultiAgentMLP
 
     net = nn.Sequential(
-        *_input_modules(obs_dim, normalize, inputs, window),
+        *_input_modules(obs_dim, normalize, inputs),
         MultiAgentMLP(
             n_agent_inputs=obs_dim,
             n_agent_outputs=1,
@@ -854,15 +768,12 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     scaler = RewardScaler(cfg["gamma"]) if cfg["normalize_reward"] else None
     episodes = EpisodeReturns()
     exploration = cfg["distribution"], cfg["initial_scale"], cfg["action_head_gain"], cfg["scale"], cfg["action_scale"]
-    window = cfg["normalize_window"]
-    inputs = cfg["inputs"], window, cfg["drop_inputs"]
-    actor = _policy_network(obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, *inputs)
-    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"], window)
+    actor = _policy_network(
+        obs_dim, action_dim, n, cfg["hidden"], normalize, *exploration, cfg["inputs"], cfg["drop_inputs"]
+    )
+    critic = _critic_network(obs_dim, n, cfg["hidden"], cfg["algo"] == "mappo", normalize, cfg["inputs"])
     scale = initial_spread(cfg, 0.0, 0)
     env.set_initial_spread(scale)  # before the collector's first reset
-    switch = cfg["train_reward_switch"]
-    late_reward = None if switch is None else switched_reward(cfg)
-    switched = False
     collector = make_collector(env, actor, cfg["frames_per_batch"], cfg["total_frames"])
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(cfg["frames_per_batch"]),
@@ -915,9 +826,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         rate = learning_rate(cfg, time.perf_counter() - begin, frames)
         for group in optim.param_groups:
             group["lr"] = rate
-        term = _smoothness_term(actor, data, cfg, len(rows)) if cfg["temporal_smoothness"] > 0 else None
-        kl, updates = _ppo_epochs(loss, optim, buffer, cfg, term)
-        smoothness = term.mean_distance if term is not None else ""
+        kl, updates = _ppo_epochs(loss, optim, buffer, cfg)
         if normalize:  # after the epochs: each batch trains with the statistics it was collected with
             for net in (actor.module[0].module, critic.module):
                 _update_norm(net, data.get(("vessel", "observation")))
@@ -927,10 +836,6 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         # the collector steps this env object: restarts from the next batch on draw at the new scale
         scale = initial_spread(cfg, elapsed, frames)
         env.set_initial_spread(scale)
-        collected_with = int(switched)  # this batch's reward: 1 once switched
-        if late_reward is not None and not switched and budget_used(cfg, elapsed, frames) >= switch["after"]:
-            env.set_reward(late_reward)  # the next batch's steps are charged with it
-            switched = True
         rows.append(
             {
                 "frames": frames,
@@ -943,8 +848,6 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
                 "kl": kl,
                 "updates": updates,
                 "initial_spread": scale,
-                "smoothness": smoothness,
-                "reward_switched": collected_with,
             }
         )
         bar.update(data.numel())
@@ -993,11 +896,8 @@ def initial_spread(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
     return curriculum_spread(cfg["initial_state_curriculum"], budget_used(cfg, elapsed, frames))
 
 
-def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any], term: Any = None) -> tuple[float, int]:
+def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tuple[float, int]:
     """The PPO epochs on one batch; returns the last minibatch's approximate KL and the number of updates.
-
-    ``term`` (a :class:`training.smoothness.SmoothnessTerm`, or None) adds the temporal smoothness term of its
-    next minibatch of pairs to each minibatch's loss.
 
     With ``target_kl`` set, the epochs stop at the first minibatch whose ``|mean kl_approx|`` (between the
     policy that collected the batch and the current one, before this minibatch's step) exceeds 1.5 ×
@@ -1015,35 +915,12 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any], term: A
             if limit is not None and kl > limit:  # as SB3: this minibatch is not stepped on
                 return kl, updates
             total = values["loss_objective"] + values["loss_critic"] + values["loss_entropy"]
-            if term is not None:
-                total = total + term()
             optim.zero_grad()
             total.backward()
             torch.nn.utils.clip_grad_norm_(loss.parameters(), cfg["max_grad_norm"])
             optim.step()
             updates += 1
     return kl, updates
-
-
-def _smoothness_term(actor: Any, data: Any, cfg: dict[str, Any], iteration: int) -> Any:
-    """The ``temporal_smoothness`` term over one batch's pairs (module docstring), for :func:`_ppo_epochs`."""
-    import torch
-
-    from training.smoothness import SmoothnessTerm
-
-    net = actor.module[0].module  # observation -> (loc, scale), in the env's units (action_scale included)
-    squash = torch.tanh if cfg["distribution"] == "tanh_normal" else (lambda loc: loc)
-
-    def mean(obs: torch.Tensor) -> torch.Tensor:
-        return squash(net(obs)[0])
-
-    # (formations, time, vessels, entries) -> (pairs, vessels, entries): the vessels stay together for the MLP
-    before, after = (
-        data.get(key).flatten(0, -3) for key in (("vessel", "observation"), ("next", "vessel", "observation"))
-    )
-    rng = np.random.default_rng([cfg["seed"], iteration])  # reproducible with the run's seed
-    pairs = cfg["temporal_smoothness_pairs"] or cfg["minibatch_size"]
-    return SmoothnessTerm(mean, before, after, cfg["temporal_smoothness"], pairs, rng)
 
 
 def make_collector(env: Any, policy: Any, frames_per_batch: int, total_frames: int) -> Any:
@@ -1098,8 +975,6 @@ def _save(
         "kl",
         "updates",
         "initial_spread",
-        "smoothness",
-        "reward_switched",
     ]
     writer = csv.DictWriter(text, fieldnames=columns)
     writer.writeheader()

@@ -107,7 +107,7 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
     from training.config import team_overrides, training_env_kwargs
-    from training.vec_env import ActionChangePenalty, SharedPolicyVecEnv, TeamsVecEnv
+    from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
     teams = [training_env_kwargs(resolved, kw) for kw in team_overrides(resolved)]  # train_reward's shaping
     if len(teams) == 1:
@@ -115,8 +115,6 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     else:
         venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **kw) for kw in teams])
     venv.seed(seed)
-    if resolved["action_change_penalty"]:  # learner-side shaping, inside the monitor: the returns it logs include it
-        venv = ActionChangePenalty(venv, resolved["action_change_penalty"], venv.dt)
     venv = VecMonitor(venv)
     norm = resolved["normalize"]
     if norm:
