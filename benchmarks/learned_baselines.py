@@ -82,6 +82,7 @@ from typing import Any
 
 import numpy as np
 
+from baselines.seeds import EVALUATION_SEED
 from benchmarks.training_throughput import parse_seeds
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least
@@ -94,7 +95,7 @@ CONFIGS = ROOT / "training" / "configs"
 DOCS = ROOT / "docs"
 MARKERS = ("<!-- learned-baselines:start -->", "<!-- learned-baselines:end -->")
 #: First evaluation seed (as ``training.learned.evaluate_run``).
-EVAL_SEED = 10_000
+EVAL_SEED = EVALUATION_SEED
 #: The learning issue's targets.
 PERFORMANCE_TARGET, SUCCESS_TARGET, CHANNEL_SUCCESS_TARGET, SMOOTHNESS_TARGET = 0.9, 0.8, 0.9, 3.0
 
@@ -361,8 +362,9 @@ def _curve(folder: Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
         return np.zeros(0), np.zeros(0)
     with path.open(newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if r.get("episode_return") not in (None, "")]
-    return (np.array([float(r["seconds"]) / 60.0 for r in rows]), np.array([float(r["episode_return"]) for r in rows]))
+        rows = [r for r in csv.DictReader(handle) if r.get("episode_return_mean") not in (None, "")]
+    minutes = np.array([float(r["wall_time_s"]) / 60.0 for r in rows])
+    return minutes, np.array([float(r["episode_return_mean"]) for r in rows])
 
 
 def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Path, path: Path) -> None:

@@ -212,7 +212,7 @@ def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_o
             # minutes 1, 3, 4 (the row at 2 min has no finished episode)
             returns = [base - 300, "", base - 200, base - 100]
             rows = "".join(f"{60 * (k + 1)},{value}\n" for k, value in enumerate(returns))
-            (folder / "progress.csv").write_text("seconds,episode_return\n" + rows)
+            (folder / "progress.csv").write_text("wall_time_s,episode_return_mean\n" + rows)
             records.append({"row": name, "seed": seed, "learned": {}, "reference": {"return": -87.0}})
     figures = []
     monkeypatch.setattr(lb, "_save_figure", lambda fig, path: figures.append(fig))

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from conftest import record_calls
 
 torch = pytest.importorskip("torch")
@@ -28,15 +29,18 @@ from marine_formation_env import ENV_ID  # noqa: E402
 from marine_formation_env.scenarios import make_config  # noqa: E402
 from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
 from training.config import load_config  # noqa: E402
+from training.learned import load_learned_policy  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
-HEADER = "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread"
+HEADER = (
+    "vessel_steps,wall_time_s,episode_return_mean,episodes,frames,mean_reward,learning_rate,kl,updates,initial_spread"
+)
 TINY = [
-    "num_envs=4",
+    "n_envs=4",
     "frames_per_batch=40",
     "total_frames=80",
     "minibatch_size=20",
-    "epochs=1",
+    "n_epochs=1",
     "eval_episodes=2",
     "hidden=[16]",
     "env_kwargs.horizon=4.0",
@@ -81,11 +85,18 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     progress = (out / "progress.csv").read_text().splitlines()
     assert progress[0] == HEADER and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
-    assert summary["frames"] == 80 and summary["vessel_steps"] == 240
+    assert summary["vessel_steps"] == 240 and summary["seeds"] == [10_000, 10_001]
+    assert int(progress[-1].split(",")[4]) == 80  # frames
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
     assert summary["reference_return"] < 0
     policy, config = load_torch_policy(out)
     assert config["algo"] == algo and config["seed"] == 3 and config["scale"] == scale
+    record = yaml.safe_load((out / "config.yaml").read_text())
+    assert (
+        record["trainer"] == "torchrl" and {k: v for k, v in record.items() if k not in ("trainer", "env_id")} == config
+    )
+    loaded, run_config = trainer.load_torchrl_run(out)
+    assert run_config == record and isinstance(load_learned_policy(out)[0], type(loaded))
     assert config["action_scale"] == action_scale
     obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
     mine = policy.act_batch(obs)
@@ -143,10 +154,10 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
     ("item", "message"),
     [
         ("algo=dqn", "algo must be one of ['mappo', 'ippo'], got 'dqn'"),
-        ("epochs=0", "epochs must be a whole number ≥ 1, got 0"),
+        ("n_epochs=0", "n_epochs must be a whole number ≥ 1, got 0"),
         ("gamma=1.5", "gamma must lie in [0, 1], got 1.5"),
         ("hidden=fish", "hidden must be a non-empty list of whole numbers ≥ 1, got 'fish'"),
-        ("frames_per_batch=100", "frames_per_batch = 100 must be a multiple of num_envs = 64"),
+        ("frames_per_batch=100", "frames_per_batch = 100 must be a multiple of n_envs = 64"),
         ("colour=1", "unknown key(s) ['colour']"),
         ("env_kwargs.frameskip=4", "unexpected keyword argument 'frameskip'"),
         ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
@@ -157,7 +168,18 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ("drop_inputs=['age', 'age']", "(repeated)"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
-        ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
+        ("learning_rate=cosine", "learning_rate must be a number or 'lin_<number>', got 'cosine'"),
+        ("learning_rate=0", "learning_rate must be > 0, got 0"),
+        ("lr=1e-3", "the key 'lr' is now 'learning_rate'"),
+        ("num_envs=8", "the key 'num_envs' is now 'n_envs'"),
+        ("lmbda=0.9", "the key 'lmbda' is now 'gae_lambda'"),
+        ("clip_epsilon=0.1", "the key 'clip_epsilon' is now 'clip_range'"),
+        ("entropy_coef=0.0", "the key 'entropy_coef' is now 'ent_coef'"),
+        ("epochs=2", "the key 'epochs' is now 'n_epochs'"),
+        (
+            "lr_schedule=linear",
+            "the key 'lr_schedule' is now 'learning_rate' (a linear schedule is learning_rate: lin_",
+        ),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
         ("scale=fixed", "scale must be one of ['state_dependent', 'state_independent'], got 'fixed'"),
@@ -201,7 +223,7 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
         args += ["--set", item]
     assert main([*args, "--set", "train_reward.terminal_penalty=false"]) == 0
     rows = (out / "progress.csv").read_text().splitlines()[1:]
-    assert rows and all(float(row.split(",")[3]) == 0.0 for row in rows)  # mean_reward
+    assert rows and all(float(row.split(",")[5]) == 0.0 for row in rows)  # mean_reward
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["learned_return"] < 0 and summary["reference_return"] < 0
     _, config = load_torch_policy(out)
@@ -218,7 +240,7 @@ def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
 
 def test_resolve_fills_defaults_and_keeps_the_seed():
     cfg = resolve({"scenario": "acoustic"}, seed=5)
-    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["num_envs"] == 64 and cfg["threads"] == 1
+    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["n_envs"] == 64 and cfg["threads"] == 1
     assert resolve({"threads": None}, seed=0)["threads"] is None  # torch's default
 
 
@@ -261,21 +283,21 @@ def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end
 
 
 def test_the_linear_schedule_falls_to_zero_over_whichever_budget_runs_out_first():
-    cfg = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000, "minutes": 10}, seed=0)
+    cfg = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000, "minutes": 10}, seed=0)
     assert trainer.learning_rate(cfg, 0.0, 0) == 1e-3
     assert trainer.learning_rate(cfg, 150.0, 100) == pytest.approx(0.75e-3)  # a quarter of the 600 s used
     assert trainer.learning_rate(cfg, 60.0, 500) == pytest.approx(0.5e-3)  # half of the frames used
     assert trainer.learning_rate(cfg, 900.0, 0) == 0.0  # past the budget: floored, never negative
-    frames_only = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000}, seed=0)
+    frames_only = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000}, seed=0)
     assert trainer.learning_rate(frames_only, 1e6, 250) == pytest.approx(0.75e-3)
-    assert trainer.learning_rate(resolve({"lr": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
+    assert trainer.learning_rate(resolve({"learning_rate": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
 
 
 def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
     out = tmp_path / "run"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
     # two iterations of two minibatch updates per epoch, 3 epochs: without a stop, 6 updates each
-    for item in [*TINY, "epochs=3", "lr=1e-3", "lr_schedule=linear", "target_kl=1e-5"]:
+    for item in [*TINY, "n_epochs=3", "learning_rate=lin_1e-3", "target_kl=1e-5"]:
         args += ["--set", item]
     assert main(args) == 0
     rows = (out / "progress.csv").read_text().splitlines()
@@ -300,7 +322,7 @@ def test_train_dt_is_the_learner_s_control_period_and_the_evaluation_keeps_the_s
             args += ["--set", item]
         assert main(args) == 0
         rows = (out / "progress.csv").read_text().splitlines()[1:]
-        counts[name] = [int(float(row.split(",")[5])) for row in rows]  # episodes
+        counts[name] = [int(float(row.split(",")[3])) for row in rows]  # episodes
         _, config = load_torch_policy(out)
         assert "dt" not in config["env_kwargs"]  # the evaluation's scenario is the benchmark's
         summary = json.loads((out / "evaluation.json").read_text())
@@ -393,7 +415,7 @@ def test_an_unreadable_policy_file_is_named(tmp_path):
 @pytest.mark.parametrize("path", sorted(Path(__file__).parents[1].glob("training/configs/torchrl/*.yaml")), ids=str)
 def test_shipped_torchrl_configs_resolve(path):
     cfg = resolve(load_config(path), seed=0)
-    assert cfg["frames_per_batch"] % cfg["num_envs"] == 0
+    assert cfg["frames_per_batch"] % cfg["n_envs"] == 0
     make_config(cfg["scenario"], **cfg["env_kwargs"])  # the scenario and every override exist
 
 

@@ -74,12 +74,14 @@ from marine_formation_env.scenarios import ConfigError, make_config
 
 __all__ = [
     "ALGOS",
+    "RENAMED_KEYS",
     "RESUMABLE_KEYS",
     "SPECIAL_KEYS",
     "TrainConfigError",
     "algo_class",
     "apply_overrides",
     "check_curriculum",
+    "check_renamed",
     "check_train_reward",
     "config_differences",
     "curriculum_spread",
@@ -142,6 +144,34 @@ _NOT_HYPERPARAMS = {"self", "policy", "env", "tensorboard_log", "verbose", "seed
 
 class TrainConfigError(ValueError):
     """An invalid training configuration (names the offending key or value)."""
+
+
+#: Keys the TorchRL and RLlib trainers once had, with the one name all three trainers now use (SB3's).
+RENAMED_KEYS = {
+    "num_envs": "n_envs",
+    "num_envs_per_env_runner": "n_envs",
+    "lr": "learning_rate",
+    "lr_schedule": "learning_rate",
+    "lmbda": "gae_lambda",
+    "lambda": "gae_lambda",
+    "clip_epsilon": "clip_range",
+    "clip_param": "clip_range",
+    "entropy_coef": "ent_coef",
+    "entropy_coeff": "ent_coef",
+    "epochs": "n_epochs",
+    "num_epochs": "n_epochs",
+    "grad_clip": "max_grad_norm",
+}
+
+
+def check_renamed(raw: dict[str, Any], renamed: dict[str, str] | None = None) -> None:
+    """Refuse a config that still uses an old key (:data:`RENAMED_KEYS`, or ``renamed``), naming the new one."""
+    table = RENAMED_KEYS if renamed is None else renamed
+    for old in raw:
+        if old in table:
+            new = table[old]
+            hint = " (a linear schedule is learning_rate: lin_<rate>)" if old == "lr_schedule" else ""
+            raise TrainConfigError(f"the key {old!r} is now {new!r}{hint}; rename it in the config or --set")
 
 
 def algo_class(name: str) -> Any:
@@ -383,6 +413,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
         TrainConfigError: unknown keys (hyperparameters, env overrides, policy
             kwargs), wrong types, or env overrides the env rejects.
     """
+    check_renamed(config)
     resolved = {**copy.deepcopy(SPECIAL_KEYS), **copy.deepcopy(config)}
     cls = algo_class(resolved["algo"])
     allowed = hyperparameter_names(cls)
@@ -428,7 +459,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     resolved["initial_state_curriculum"] = check_curriculum(resolved["initial_state_curriculum"])
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
-        _parse_schedule(lr)
+        parse_schedule(lr)
     norm = resolved["normalize"]
     if not isinstance(norm, (bool, dict)):
         raise TrainConfigError(f"normalize must be true/false or a mapping of VecNormalize arguments, got {norm!r}")
@@ -556,7 +587,8 @@ def _check_hyperparameters(resolved: dict[str, Any]) -> None:
         raise TrainConfigError(f"ent_coef must be a number ≥ 0 (or 'auto' for sac), got {ent!r}")
 
 
-def _parse_schedule(value: str) -> float:
+def parse_schedule(value: str) -> float:
+    """The start of a ``lin_<rate>`` learning rate (falls linearly to 0); refuses anything else by name."""
     if not value.startswith("lin_"):
         raise TrainConfigError(f"learning_rate must be a number or 'lin_<number>', got {value!r}")
     try:
@@ -575,7 +607,7 @@ def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:
     kwargs = {k: v for k, v in resolved.items() if k not in SPECIAL_KEYS}
     lr = kwargs.get("learning_rate")
     if isinstance(lr, str):
-        start = _parse_schedule(lr)
+        start = parse_schedule(lr)
         kwargs["learning_rate"] = lambda progress: progress * start
     policy_kwargs = dict(resolved["policy_kwargs"])
     if "activation_fn" in policy_kwargs:

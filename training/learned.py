@@ -3,9 +3,10 @@
 :class:`ModelPolicy` wraps an SB3 model (and the observation normalization it
 was trained with) as a policy over PettingZoo observation dicts: every vessel
 acts from its own masked observation with the shared network.
-:func:`load_learned_policy` loads one from a run folder written by
+:func:`load_sb3_run` loads one from a run folder written by
 ``python -m training.train`` (``model.zip``, ``vecnormalize.pkl``,
-``config.yaml``).
+``config.yaml``); :func:`load_learned_policy` loads a run folder of any trainer,
+by the ``trainer`` field of its ``config.yaml``.
 """
 
 from __future__ import annotations
@@ -16,10 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from baselines.rollout import BatchPolicy
-from marine_formation_env import ENV_ID
+from training import run_folder
 from training.config import algo_class
 
 __all__ = [
@@ -29,6 +29,7 @@ __all__ = [
     "evaluate_run",
     "evaluation_summary",
     "load_learned_policy",
+    "load_sb3_run",
     "member_metrics",
     "run_folder_of",
 ]
@@ -93,57 +94,84 @@ class ModelPolicy(BatchPolicy):
 
 
 def run_folder_of(path: str | Path) -> Path:
-    """The run folder of a model path (``runs/NAME/model.zip``) or of a folder (``runs/NAME``)."""
+    """The run folder of a path in it: the folder itself, its ``model.zip`` or checkpoint, RLlib's ``checkpoint/``.
+
+    The nearest of ``path``, its parent and its grandparent that holds a ``config.yaml``; ``path`` itself (a
+    folder) or its parent (a file) if none does.
+    """
     path = Path(path)
+    for candidate in (path, path.parent, path.parent.parent):
+        if candidate.is_dir() and (candidate / run_folder.CONFIG_FILE).is_file():
+            return candidate
     return path if path.is_dir() else path.parent
+
+
+#: The loader of each trainer's run folders (``module:function``); the entry points
+#: ``marine_formation_env.trainers`` of ``pyproject.toml`` name the same functions.
+LOADERS = {
+    "sb3": "training.learned:load_sb3_run",
+    "torchrl": "training.torchrl_ppo:load_torchrl_run",
+    "rllib": "training.rllib_ppo:load_rllib_run",
+}
 
 
 def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[Any, dict[str, Any]]:
     """Load a trained policy and the resolved config of its run.
 
+    The kind of run is ``config.yaml``'s ``trainer`` field (:func:`training.run_folder.read_config`), and its
+    loader is the one :data:`LOADERS` names for it.
+
     Args:
-        path: ``runs/NAME/model.zip`` (or any checkpoint ``.zip`` in a run
-            folder) or the run folder itself; a run folder of
-            ``training.torchrl_ppo`` (``policy.pt``) gives a
-            :class:`~training.torchrl_ppo.TorchPolicy`, one of
-            ``training.rllib_ppo`` (``checkpoint/``) a
-            :class:`~training.rllib_ppo.RLlibPolicy`.
+        path: a run folder of any trainer (or a path in it, :func:`run_folder_of`), or one SB3 model file of a run
+            folder (``model.zip``, ``best_model.zip``, a checkpoint in ``checkpoints/``).
+        deterministic: act with the distribution's mode (the default; the TorchRL and RLlib policies act
+            deterministically only).
 
     Returns:
-        ``(policy, config)`` where ``config`` is the run's resolved training
-        config (``scenario`` and ``env_kwargs`` say what it was trained on).
+        ``(policy, config)`` where ``config`` is the run's ``config.yaml`` (``trainer``, ``seed``, ``scenario``
+        and ``env_kwargs`` say what it was trained on).
+
+    Raises:
+        training.run_folder.RunFolderError: no ``config.yaml``, or one without a ``trainer`` field.
+        UnreadableRunError: the policy files cannot be read.
     """
+    import importlib
+
     path = Path(path)
-    if path.is_dir() and ((path / "checkpoint" / "learner_group").is_dir() or (path / "learner_group").is_dir()):
-        from training.rllib_ppo import load_rllib_policy  # a run (or the checkpoint) of training.rllib_ppo
+    run = run_folder_of(path)
+    config = run_folder.read_config(run)
+    if path.is_file():  # one model file of an SB3 run
+        if config["trainer"] != "sb3":
+            raise UnreadableRunError(f"{str(path)!r} is a file of a {config['trainer']} run; pass the run folder {run}")
+        return _load_sb3_model(path, config, deterministic)
+    module, _, name = LOADERS[config["trainer"]].partition(":")
+    loader = getattr(importlib.import_module(module), name)
+    try:
+        return loader(run, deterministic=deterministic)  # type: ignore[no-any-return]
+    except ValueError as err:
+        if isinstance(err, UnreadableRunError):
+            raise
+        raise UnreadableRunError(str(err)) from None
 
-        try:
-            return load_rllib_policy(path)
-        except ValueError as err:
-            raise UnreadableRunError(str(err)) from None
-    if path.is_dir() and (path / "policy.pt").is_file():  # a run of training.torchrl_ppo
-        from training.torchrl_ppo import load_torch_policy
 
-        try:
-            return load_torch_policy(path)
-        except ValueError as err:
-            raise UnreadableRunError(str(err)) from None
-    model_path = path / "model.zip" if path.is_dir() else path
-    folder = run_folder_of(path)
+def load_sb3_run(run: Path, deterministic: bool = True) -> tuple[BatchPolicy, dict[str, Any]]:
+    """The final policy of a ``training.train`` run folder (``model.zip``, ``vecnormalize.pkl``) and its config.
+
+    The loader of the ``sb3`` entry point of ``marine_formation_env.trainers``.
+    """
+    run = Path(run)
+    return _load_sb3_model(run / "model.zip", run_folder.read_config(run), deterministic)
+
+
+def _load_sb3_model(
+    model_path: Path, config: dict[str, Any], deterministic: bool
+) -> tuple[ModelPolicy, dict[str, Any]]:
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {str(model_path)!r}")
-    config_path = folder / "config.yaml"
-    if not config_path.is_file():
-        config_path = folder.parent / "config.yaml"  # a checkpoint in runs/NAME/checkpoints/
-    if not config_path.is_file():
-        raise FileNotFoundError(f"no config.yaml beside {str(model_path)!r}: was it written by training.train?")
     try:
-        config = yaml.safe_load(config_path.read_text())[ENV_ID]
-        algo = config["algo"]
-    except (yaml.YAMLError, KeyError, TypeError) as err:
-        raise UnreadableRunError(f"{config_path} is not a training config ({type(err).__name__}: {err})") from None
-    try:
-        model = algo_class(algo).load(model_path, device="cpu")
+        model = algo_class(config["algo"]).load(model_path, device="cpu")
+    except KeyError as err:
+        raise UnreadableRunError(f"the config of {model_path.parent} has no {err}") from None
     except UNREADABLE as err:
         raise UnreadableRunError(f"cannot load the model {str(model_path)!r}: {_reason(err)}") from None
     normalizer = None
@@ -173,28 +201,30 @@ UNREADABLE = (
 
 
 def evaluate_run(
-    out: Path, policy: Any, cfg: dict[str, Any], frames: int, vessel_steps: int, seconds: float
+    out: Path, policy: Any, cfg: dict[str, Any], *, vessel_steps: int, wall_time_s: float
 ) -> dict[str, Any]:
-    """A trained policy and the reference on the same seeds (10 000 +), written to ``out/evaluation.json``.
+    """A trained policy and the reference on the evaluation seeds, written to ``out/evaluation.json``.
 
-    The closing evaluation of ``training.torchrl_ppo`` and ``training.rllib_ppo``
-    (the engine of ``baselines.evaluate``): ``cfg`` gives ``scenario``,
-    ``env_kwargs`` and ``eval_episodes``; ``frames``, ``vessel_steps`` and
-    ``seconds`` say how much training the policy had.
+    The closing evaluation of every trainer (the engine of ``baselines.evaluate``), on
+    ``baselines.seeds.evaluation_seeds(cfg["eval_episodes"])`` of ``cfg``'s ``scenario`` and ``env_kwargs``
+    (the benchmark's reward, never ``train_reward``). The file's schema is the same for every trainer:
+    ``seeds``, ``vessel_steps`` and ``wall_time_s`` (how much training the policy had), then for ``learned``
+    and ``reference`` each ``<name>_return`` (mean), ``<name>_success`` (rate), ``<name>_returns`` (per
+    episode) and ``<name>_action_change`` (mean per step) (:func:`evaluation_summary`).
     """
     import json
 
+    from baselines.seeds import evaluation_seeds
     from marine_formation_env.atomic import atomic_write_text
 
-    seeds = [10_000 + k for k in range(cfg["eval_episodes"])]
+    seeds = evaluation_seeds(cfg["eval_episodes"])
     summary = {
         "seeds": seeds,
-        "frames": frames,
-        "vessel_steps": vessel_steps,
-        "seconds": seconds,
+        "vessel_steps": int(vessel_steps),
+        "wall_time_s": float(wall_time_s),
         **evaluation_summary(policy, cfg["scenario"], cfg["env_kwargs"], seeds),
     }
-    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / run_folder.EVALUATION_FILE, json.dumps(summary, indent=2) + "\n")
     return summary
 
 

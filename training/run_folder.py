@@ -17,6 +17,22 @@ small journal (``.commit.json``, atomically: the commit point) naming the
 renames, then performs them and removes the journal. :func:`recover` finishes
 a journal a kill interrupted, so such files always come from the same model.
 
+Every run folder, whatever its trainer, holds the same four things
+(:data:`CONFIG_FILE`, :data:`PROGRESS_FILE`, :data:`EVALUATION_FILE` and the
+trainer's policy file):
+
+* ``config.yaml``: one flat mapping, the resolved config with three more
+  top-level fields: ``trainer`` (``sb3``, ``torchrl`` or ``rllib``: the kind of
+  run folder, read by :func:`read_config`, never guessed from the files),
+  ``env_id`` and ``seed`` (:func:`config_record`);
+* ``progress.csv``: one row per iteration (per rollout for SB3), the shared
+  columns :data:`PROGRESS_COLUMNS` first, then the trainer's own;
+* ``evaluation.json``: the learned policy and the reference on
+  ``baselines.seeds.evaluation_seeds(eval_episodes)``
+  (:func:`training.learned.evaluate_run`);
+* the policy: ``model.zip`` and ``vecnormalize.pkl`` (SB3), ``policy.pt``
+  (TorchRL), ``checkpoint/`` (RLlib).
+
 Checkpoints keep SB3's names: ``checkpoints/model_<N>_steps.zip`` and
 ``checkpoints/model_vecnormalize_<N>_steps.pkl``; the statistics are written
 first (after removing a zip of the same name), so a checkpoint zip exists only
@@ -39,16 +55,27 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+import yaml
+
+from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import TEMP_MARK, atomic_path, fsync_folder, temporary_beside
 
 __all__ = [
     "ARTIFACTS",
+    "CONFIG_FILE",
+    "EVALUATION_FILE",
+    "PROGRESS_COLUMNS",
+    "PROGRESS_FILE",
+    "TRAINERS",
     "Checkpoint",
+    "RunFolderError",
     "atomic_write",
     "checkpoint_problem",
+    "config_record",
     "list_checkpoints",
     "present_artifacts",
     "read_best",
+    "read_config",
     "read_evaluations",
     "recover",
     "remove_artifacts",
@@ -59,9 +86,24 @@ __all__ = [
     "temporaries",
     "truncate_evaluations",
     "write_bytes",
+    "write_config",
     "write_evaluations",
+    "write_progress",
     "write_together",
 ]
+
+#: The run's resolved config (:func:`config_record`).
+CONFIG_FILE = "config.yaml"
+#: The learning curve: :data:`PROGRESS_COLUMNS`, then the trainer's own columns.
+PROGRESS_FILE = "progress.csv"
+#: The closing evaluation on the evaluation seeds (:func:`training.learned.evaluate_run`).
+EVALUATION_FILE = "evaluation.json"
+#: The values of ``config.yaml``'s ``trainer`` field.
+TRAINERS = ("sb3", "torchrl", "rllib")
+#: The first columns of every trainer's ``progress.csv``, in this order: vessel-steps trained so far, wall-clock
+#: seconds since the start of training, the mean return per vessel of the training episodes that ended in the row
+#: (the env's reward as the learner saw it; empty when none ended) and their number.
+PROGRESS_COLUMNS = ("vessel_steps", "wall_time_s", "episode_return_mean", "episodes")
 
 #: Names of the temporary files of :func:`atomic_write` and :func:`write_together`: ``.NAME.<random>.tmp<suffix>``.
 _TEMP_RE = re.compile(rf"\..+\.[A-Za-z0-9_]+{re.escape(TEMP_MARK)}(\.[A-Za-z0-9_]+)?")
@@ -69,14 +111,15 @@ _TEMP_RE = re.compile(rf"\..+\.[A-Za-z0-9_]+{re.escape(TEMP_MARK)}(\.[A-Za-z0-9_
 JOURNAL = ".commit.json"
 #: What a run leaves in its folder; a new run refuses a folder holding any of them (``--overwrite`` removes them).
 ARTIFACTS = (
-    "config.yaml",
+    CONFIG_FILE,
     "model.zip",
     "vecnormalize.pkl",
     "best_model.zip",
     "best_vecnormalize.pkl",
     "best_model.json",
     "evaluations.csv",
-    "progress.csv",
+    PROGRESS_FILE,
+    EVALUATION_FILE,
     "tb",
     "checkpoints",
     JOURNAL,
@@ -342,3 +385,64 @@ def read_best(out: Path) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return record if isinstance(record, dict) and "return_learned" in record else None
+
+
+# --------------------------------------------------------------------------- the run-folder contract
+
+
+class RunFolderError(ValueError):
+    """A run folder whose ``config.yaml`` is missing, unreadable or has no valid ``trainer`` (names the folder)."""
+
+
+def config_record(trainer: str, resolved: dict[str, Any], seed: int) -> dict[str, Any]:
+    """What ``config.yaml`` holds: ``trainer``, ``env_id`` and ``seed``, then the resolved config's keys."""
+    if trainer not in TRAINERS:
+        raise ValueError(f"trainer must be one of {list(TRAINERS)}, got {trainer!r}")
+    rest = {k: v for k, v in resolved.items() if k not in ("trainer", "env_id", "seed")}
+    return {"trainer": trainer, "env_id": ENV_ID, "seed": int(seed), **rest}
+
+
+def write_config(out: Path, trainer: str, resolved: dict[str, Any], seed: int) -> dict[str, Any]:
+    """Write ``out/config.yaml`` (:func:`config_record`) atomically; return the record."""
+    record = config_record(trainer, resolved, seed)
+    write_bytes(out / CONFIG_FILE, yaml.safe_dump(record, sort_keys=False, allow_unicode=True).encode())
+    return record
+
+
+def read_config(run: str | Path) -> dict[str, Any]:
+    """The ``config.yaml`` of run folder ``run`` as written by :func:`write_config`.
+
+    Raises:
+        RunFolderError: no ``config.yaml``, not YAML, not a mapping, or no ``trainer`` field of
+            :data:`TRAINERS` (the message names the folder and the field).
+    """
+    run = Path(run)
+    path = run / CONFIG_FILE
+    if not path.is_file():
+        raise RunFolderError(f"{str(run)!r} is not a run folder: it has no {CONFIG_FILE}")
+    try:
+        record = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise RunFolderError(f"{str(path)!r} is not readable YAML ({type(err).__name__}: {err})") from None
+    if not isinstance(record, dict):
+        raise RunFolderError(f"{str(path)!r} is not a mapping")
+    if "trainer" not in record:
+        raise RunFolderError(
+            f"run folder {str(run)!r}: {CONFIG_FILE} has no 'trainer' field (one of {list(TRAINERS)}); "
+            "it was written before run folders recorded their trainer"
+        )
+    if record["trainer"] not in TRAINERS:
+        raise RunFolderError(
+            f"run folder {str(run)!r}: {CONFIG_FILE}'s trainer must be one of {list(TRAINERS)}, "
+            f"got {record['trainer']!r}"
+        )
+    return record
+
+
+def write_progress(path: Path, rows: list[dict[str, Any]], own_columns: tuple[str, ...] = ()) -> None:
+    """Write ``progress.csv`` atomically: :data:`PROGRESS_COLUMNS`, then ``own_columns`` (the trainer's)."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=[*PROGRESS_COLUMNS, *own_columns])
+    writer.writeheader()
+    writer.writerows(rows)
+    write_bytes(path, text.getvalue().encode())

@@ -163,7 +163,6 @@ to the reference.
 
 from __future__ import annotations
 
-import csv
 import inspect
 import io
 import json
@@ -175,9 +174,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from marine_formation_env.atomic import atomic_write_bytes, atomic_write_text
+from marine_formation_env.atomic import atomic_write_bytes
 from marine_formation_env.cli import ArgumentParser, report_error
 from training.config import (
     TrainConfigError,
@@ -189,11 +187,14 @@ from training.config import (
     add_run_arguments,
     budget_fraction,
     check_curriculum,
+    check_renamed,
     check_train_reward,
     config_from_arguments,
     curriculum_spread,
+    parse_schedule,
     training_env_kwargs,
 )
+from training.run_folder import PROGRESS_FILE, read_config, write_config, write_progress
 
 __all__ = [
     "DEFAULTS",
@@ -202,6 +203,7 @@ __all__ = [
     "TorchPolicy",
     "learning_rate",
     "load_torch_policy",
+    "load_torchrl_run",
     "make_collector",
     "resolve",
     "running_norm",
@@ -214,7 +216,7 @@ DEFAULTS: dict[str, Any] = {
     "algo": "mappo",
     "scenario": "paper",
     "env_kwargs": {},
-    "num_envs": 64,
+    "n_envs": 64,
     "frames_per_batch": 6400,
     "total_frames": 1_000_000,
     "minutes": None,
@@ -224,15 +226,14 @@ DEFAULTS: dict[str, Any] = {
     "scale": "state_dependent",
     "action_head_gain": None,
     "action_scale": 1.0,
-    "lr": 3e-4,
-    "lr_schedule": "constant",
+    "learning_rate": 3e-4,
     "target_kl": None,
     "max_grad_norm": 1.0,
     "gamma": 0.99,
-    "lmbda": 0.95,
-    "clip_epsilon": 0.2,
-    "entropy_coef": 1e-4,
-    "epochs": 4,
+    "gae_lambda": 0.95,
+    "clip_range": 0.2,
+    "ent_coef": 1e-4,
+    "n_epochs": 4,
     "minibatch_size": 1600,
     "inputs": "raw",
     "drop_inputs": [],
@@ -247,17 +248,19 @@ DEFAULTS: dict[str, Any] = {
 }
 
 ALGOS = ("mappo", "ippo")
-LR_SCHEDULES = ("constant", "linear")
 DISTRIBUTIONS = ("tanh_normal", "normal")
 SCALES = ("state_dependent", "state_independent")
 INPUTS = ("raw", "predicted")
 POLICY_FILE = "policy.pt"
+#: The trainer's own columns of ``progress.csv``, after :data:`training.run_folder.PROGRESS_COLUMNS`.
+PROGRESS_OWN_COLUMNS = ("frames", "mean_reward", "learning_rate", "kl", "updates", "initial_spread")
 #: Seconds of training between the intermediate saves of ``policy.pt`` and ``progress.csv``.
 SAVE_SECONDS = 60.0
 
 
 def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     """The config with defaults filled in and every value checked (``TrainConfigError`` names the bad one)."""
+    check_renamed(raw)
     unknown = sorted(set(raw) - set(DEFAULTS) - {"seed"})
     if unknown:
         raise TrainConfigError(f"unknown key(s) {unknown}; valid keys: {sorted(DEFAULTS)}")
@@ -266,13 +269,17 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(f"algo must be one of {list(ALGOS)}, got {cfg['algo']!r}")
     if not isinstance(cfg["env_kwargs"], dict):
         raise TrainConfigError(f"env_kwargs must be a mapping, got {cfg['env_kwargs']!r}")
-    for key in ("num_envs", "frames_per_batch", "total_frames", "epochs", "minibatch_size", "eval_episodes"):
+    for key in ("n_envs", "frames_per_batch", "total_frames", "n_epochs", "minibatch_size", "eval_episodes"):
         cfg[key] = _whole(key, cfg[key], 1)
-    for key in ("lr", "max_grad_norm", "clip_epsilon", "initial_scale"):
+    if isinstance(cfg["learning_rate"], str):  # lin_<rate>: SB3's (rl-zoo's) linear schedule
+        parse_schedule(cfg["learning_rate"])
+    else:
+        cfg["learning_rate"] = _positive("learning_rate", cfg["learning_rate"])
+    for key in ("max_grad_norm", "clip_range", "initial_scale"):
         cfg[key] = _positive(key, cfg[key])
-    for key in ("gamma", "lmbda"):
+    for key in ("gamma", "gae_lambda"):
         cfg[key] = _fraction(key, cfg[key])
-    cfg["entropy_coef"] = _non_negative("entropy_coef", cfg["entropy_coef"])
+    cfg["ent_coef"] = _non_negative("ent_coef", cfg["ent_coef"])
     for key in ("normalize_observations", "normalize_advantage", "normalize_reward"):
         if not isinstance(cfg[key], bool):
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
@@ -292,8 +299,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(f"scale must be one of {list(SCALES)}, got {cfg['scale']!r}")
     if cfg["distribution"] not in DISTRIBUTIONS:
         raise TrainConfigError(f"distribution must be one of {list(DISTRIBUTIONS)}, got {cfg['distribution']!r}")
-    if cfg["lr_schedule"] not in LR_SCHEDULES:
-        raise TrainConfigError(f"lr_schedule must be one of {list(LR_SCHEDULES)}, got {cfg['lr_schedule']!r}")
     if cfg["target_kl"] is not None:
         cfg["target_kl"] = _positive("target_kl", cfg["target_kl"])
     if cfg["threads"] is not None:
@@ -301,9 +306,9 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     if cfg["action_head_gain"] is not None:
         cfg["action_head_gain"] = _positive("action_head_gain", cfg["action_head_gain"])
     cfg["hidden"] = _hidden(cfg["hidden"])
-    if cfg["frames_per_batch"] % cfg["num_envs"]:
+    if cfg["frames_per_batch"] % cfg["n_envs"]:
         raise TrainConfigError(
-            f"frames_per_batch = {cfg['frames_per_batch']} must be a multiple of num_envs = {cfg['num_envs']}"
+            f"frames_per_batch = {cfg['frames_per_batch']} must be a multiple of n_envs = {cfg['n_envs']}"
         )
     if cfg["minibatch_size"] > cfg["frames_per_batch"]:
         raise TrainConfigError(
@@ -706,6 +711,21 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
     return TorchPolicy(actor, int(dims["observation"]), int(dims["action"]), distribution, units), config
 
 
+def load_torchrl_run(run: Path, deterministic: bool = True) -> tuple[TorchPolicy, dict[str, Any]]:
+    """The policy of a ``training.torchrl_ppo`` run folder and the run's ``config.yaml``.
+
+    The loader of the ``torchrl`` entry point of ``marine_formation_env.trainers``. The policy acts
+    deterministically (the Gaussian's mean, squashed or clipped as in training).
+
+    Raises:
+        ValueError: ``deterministic`` is false, or ``policy.pt`` is not a readable policy of this trainer.
+    """
+    if not deterministic:
+        raise ValueError(f"the policy of the TorchRL run {str(run)!r} acts deterministically only")
+    policy, _ = load_torch_policy(run)
+    return policy, read_config(run)
+
+
 def _update_norm(net: Any, observations: Any) -> None:
     """Merge a batch into the running norm of a network's ``nn.Sequential``, as the modules before it (an input
     mask) hand it on."""
@@ -761,7 +781,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     torch.manual_seed(seed)
     # the learner's env: the scenario with train_reward's shaping and train_dt (none by default); the evaluation
     # uses env_kwargs
-    env = MarineFormationTorchEnv(num_envs=cfg["num_envs"], scenario=cfg["scenario"], **learner_env_kwargs(cfg))
+    env = MarineFormationTorchEnv(num_envs=cfg["n_envs"], scenario=cfg["scenario"], **learner_env_kwargs(cfg))
     env.set_seed(seed)
     n, obs_dim, action_dim = env.n_agents, env.core.layout.dim, env.config.action_dim
     normalize = cfg["normalize_observations"]
@@ -783,8 +803,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     loss = ClipPPOLoss(
         actor_network=actor,
         critic_network=critic,
-        clip_epsilon=cfg["clip_epsilon"],
-        entropy_coeff=cfg["entropy_coef"],
+        clip_epsilon=cfg["clip_range"],
+        entropy_coeff=cfg["ent_coef"],
         normalize_advantage=cfg["normalize_advantage"],
     )
     # one shared policy: its advantages are standardized over every vessel together (TorchRL warns that
@@ -798,11 +818,11 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         terminated=("vessel", "terminated"),
         sample_log_prob=("vessel", "action_log_prob"),
     )
-    loss.make_value_estimator(ValueEstimators.GAE, gamma=cfg["gamma"], lmbda=cfg["lmbda"])
-    optim = torch.optim.Adam(loss.parameters(), lr=cfg["lr"])
+    loss.make_value_estimator(ValueEstimators.GAE, gamma=cfg["gamma"], lmbda=cfg["gae_lambda"])
+    optim = torch.optim.Adam(loss.parameters(), lr=learning_rate(cfg, 0.0, 0))
 
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
+    write_config(out, "torchrl", cfg, cfg["seed"])
     rows: list[dict[str, Any]] = []
     begin = time.perf_counter()
     saved_at = 0.0
@@ -838,13 +858,13 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         env.set_initial_spread(scale)
         rows.append(
             {
-                "frames": frames,
                 "vessel_steps": frames * n,
-                "seconds": round(elapsed, 3),
-                "mean_reward": mean_reward,
-                "episode_return": float(np.mean(ended)) if ended else "",
+                "wall_time_s": round(elapsed, 3),
+                "episode_return_mean": float(np.mean(ended)) if ended else "",
                 "episodes": len(ended),
-                "lr": rate,
+                "frames": frames,
+                "mean_reward": mean_reward,
+                "learning_rate": rate,
                 "kl": kl,
                 "updates": updates,
                 "initial_spread": scale,
@@ -863,8 +883,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     from training.learned import evaluate_run
 
     policy, _ = load_torch_policy(out)
-    last: dict[str, Any] = rows[-1] if rows else {"frames": 0, "vessel_steps": 0, "seconds": 0.0}
-    summary = evaluate_run(out, policy, cfg, int(last["frames"]), int(last["vessel_steps"]), float(last["seconds"]))
+    last: dict[str, Any] = rows[-1] if rows else {"vessel_steps": 0, "wall_time_s": 0.0}
+    summary = evaluate_run(
+        out, policy, cfg, vessel_steps=int(last["vessel_steps"]), wall_time_s=float(last["wall_time_s"])
+    )
     env.close()
     return summary
 
@@ -879,13 +901,13 @@ def budget_used(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
 
 
 def learning_rate(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
-    """The Adam rate of the next iteration: ``lr``, or with ``lr_schedule: linear`` ``lr`` times the budget left.
+    """The Adam rate of the next iteration: ``learning_rate``, or for ``lin_<rate>`` that rate times the budget left.
 
     The budget left is ``1 −`` :func:`budget_used`, floored at 0.
     """
-    if cfg["lr_schedule"] == "constant":
-        return float(cfg["lr"])
-    return float(cfg["lr"]) * max(0.0, 1.0 - budget_used(cfg, elapsed, frames))
+    if not isinstance(cfg["learning_rate"], str):
+        return float(cfg["learning_rate"])
+    return parse_schedule(cfg["learning_rate"]) * max(0.0, 1.0 - budget_used(cfg, elapsed, frames))
 
 
 def initial_spread(cfg: dict[str, Any], elapsed: float, frames: int) -> float:
@@ -907,7 +929,7 @@ def _ppo_epochs(loss: Any, optim: Any, buffer: Any, cfg: dict[str, Any]) -> tupl
 
     kl, updates = float("nan"), 0
     limit = None if cfg["target_kl"] is None else 1.5 * cfg["target_kl"]
-    for _ in range(cfg["epochs"]):
+    for _ in range(cfg["n_epochs"]):
         for _ in range(cfg["frames_per_batch"] // cfg["minibatch_size"]):
             values = loss(buffer.sample())
             if "kl_approx" in values.keys():
@@ -963,23 +985,7 @@ def _save(
         buffer,
     )
     atomic_write_bytes(out / POLICY_FILE, buffer.getvalue())
-    text = io.StringIO()
-    columns = [
-        "frames",
-        "vessel_steps",
-        "seconds",
-        "mean_reward",
-        "episode_return",
-        "episodes",
-        "lr",
-        "kl",
-        "updates",
-        "initial_spread",
-    ]
-    writer = csv.DictWriter(text, fieldnames=columns)
-    writer.writeheader()
-    writer.writerows(rows)
-    atomic_write_text(out / "progress.csv", text.getvalue())
+    write_progress(out / PROGRESS_FILE, rows, PROGRESS_OWN_COLUMNS)
 
 
 # ----------------------------------------------------------------------------- command line

@@ -8,14 +8,18 @@ Example::
     python -m training.train --resume --out runs/paper_speed        # continue from the last checkpoint
     python -m training.train --resume --out runs/paper_speed --set n_timesteps=4e6   # ... and train longer
 
-The run folder gets ``config.yaml`` (the resolved config, with the seed),
-``model.zip`` and ``vecnormalize.pkl`` (the final policy and its observation
-statistics), ``best_model.zip`` + ``best_vecnormalize.pkl`` (best evaluation
-against the reference; ``best_model.json`` records its score and step),
-``checkpoints/`` (``model_<N>_steps.zip`` + ``model_vecnormalize_<N>_steps.pkl``,
-including one at step 0), ``evaluations.csv``, ``progress.csv`` (the learning
-curve: per rollout, vessel-steps, seconds and the mean return of the training
-episodes that ended, :class:`~training.callbacks.ProgressLog`) and TensorBoard
+The run folder gets ``config.yaml`` (the resolved config with ``trainer: sb3``,
+``env_id`` and the seed: :func:`training.run_folder.write_config`), ``model.zip``
+and ``vecnormalize.pkl`` (the final policy and its observation statistics),
+``evaluation.json`` (the final policy and the reference on
+``baselines.seeds.evaluation_seeds(eval_episodes)``, written when training ends),
+``best_model.zip`` + ``best_vecnormalize.pkl`` (best evaluation against the
+reference; ``best_model.json`` records its score and step), ``checkpoints/``
+(``model_<N>_steps.zip`` + ``model_vecnormalize_<N>_steps.pkl``, including one
+at step 0), ``evaluations.csv`` (the evaluations during training, on
+``baselines.seeds.development_seeds``), ``progress.csv`` (the learning curve,
+one row per rollout: :data:`training.run_folder.PROGRESS_COLUMNS`,
+:class:`~training.callbacks.ProgressLog`) and TensorBoard
 logs in ``tb/`` (``tensorboard --logdir runs``).
 
 The run folder never holds half-written files: every file above is written
@@ -28,7 +32,8 @@ Rules:
 
 * A new run refuses a folder that holds anything of another run
   (``config.yaml``, ``model.zip``, ``vecnormalize.pkl``, ``best_model.*``,
-  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``progress.csv``, ``tb/``, ``checkpoints/``);
+  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``progress.csv``, ``evaluation.json``, ``tb/``,
+  ``checkpoints/``);
   ``--overwrite`` removes those first (only once the new config has been
   checked, by building the algorithm on the real env).
 * ``--resume`` continues from the newest *readable* checkpoint: empty,
@@ -59,9 +64,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from marine_formation_env import ENV_ID
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from training import run_folder
 from training.config import (
@@ -198,7 +200,6 @@ def train(
     extra_callbacks: Sequence[Any] = (),
     verbose: int = 0,
     threads: int = 1,
-    config_record: dict[str, Any] | None = None,
     minutes: float | None = None,
 ) -> Any:
     """Train (or resume) and save into ``out``; return the model.
@@ -216,9 +217,9 @@ def train(
     2-core machine one thread leaves the other core to the simulation (measured:
     a small ``nn.Linear`` call took ~8 ms with 2 threads under load, 0.02 ms with 1).
 
-    ``config_record`` (e.g. the resolved config with its seed) is written to
-    ``out/config.yaml`` once the model is built or loaded, before training.
-    Stale temporary files in ``out`` are removed first and an interrupted
+    ``out/config.yaml`` (``trainer: sb3``, ``env_id``, ``seed`` and ``resolved``) is written once the model is
+    built or loaded, before training; ``out/evaluation.json`` once training has ended
+    (:func:`training.learned.evaluate_run`). Stale temporary files in ``out`` are removed first and an interrupted
     update of the best model is completed (:func:`training.run_folder.recover`).
 
     Raises:
@@ -254,9 +255,7 @@ def train(
             print(f"dropped {dropped} row(s) of evaluations.csv after step {steps}", file=sys.stderr)
     else:
         model = build_model(resolved, venv, seed, verbose=verbose, tensorboard_log=str(out / "tb"))
-    if config_record is not None:
-        text = yaml.safe_dump({ENV_ID: config_record}, sort_keys=False)
-        run_folder.write_bytes(out / "config.yaml", text.encode())
+    run_folder.write_config(out, "sb3", resolved, seed)
     stop = StopRequest()
     log = ProgressLog(out)
     if resume:
@@ -315,16 +314,27 @@ def train(
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
     venv.close()
+    from training.learned import evaluate_run, load_sb3_run
+
+    policy, _ = load_sb3_run(out)
+    wall_time = float(log.rows[-1]["wall_time_s"]) if log.rows else 0.0
+    evaluate_run(out, policy, resolved, vessel_steps=int(model.num_timesteps), wall_time_s=wall_time)
     return model
 
 
 def _resume_config(out: Path, config: Path | None, overrides: dict[str, Any], seed: int | None) -> tuple[Any, int]:
     """The resolved config and seed of ``--resume``; refuses changes beyond :data:`RESUMABLE_KEYS`."""
-    saved = out / "config.yaml"
+    saved = out / run_folder.CONFIG_FILE
     if not saved.is_file():
         raise TrainConfigError(f"--resume: {saved} does not exist")
-    stored = load_config(saved)
+    try:
+        stored = run_folder.read_config(out)
+    except run_folder.RunFolderError as err:
+        raise TrainConfigError(f"--resume: {err}") from None
+    if stored["trainer"] != "sb3":
+        raise TrainConfigError(f"--resume: {out} is a run of the {stored['trainer']} trainer, not of {PROG}")
     stored_seed = stored.pop("seed", 0)
+    stored = {k: v for k, v in stored.items() if k not in ("trainer", "env_id")}
     base = load_config(config) if config is not None else stored
     resolved = validate(apply_overrides(base, overrides))
     changed = [
@@ -396,7 +406,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             not args.quiet,
             verbose=args.verbose,
             threads=args.threads,
-            config_record={**resolved, "seed": seed},
         )
     except NoCheckpointError as err:
         parser.error(str(err))
