@@ -24,6 +24,7 @@ pytest.importorskip("torchrl")
 from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
+import training.torchrl_networks as networks  # noqa: E402
 import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
 from marine_formation_env.scenarios import make_config  # noqa: E402
@@ -35,6 +36,8 @@ from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve,
 HEADER = (
     "vessel_steps,wall_time_s,episode_return_mean,episodes,frames,mean_reward,learning_rate,kl,updates,initial_spread"
 )
+#: A small actor of 3 vessels: keyword arguments of ``policy_network`` beside the sizes.
+SMALL = {"n_agents": 3, "hidden": [16], "distribution": "normal", "initial_scale": 0.3}
 TINY = [
     "n_envs=4",
     "frames_per_batch=40",
@@ -95,7 +98,7 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     assert (
         record["trainer"] == "torchrl" and {k: v for k, v in record.items() if k not in ("trainer", "env_id")} == config
     )
-    loaded, run_config = trainer.load_torchrl_run(out)
+    loaded, run_config = networks.load_torchrl_run(out)
     assert run_config == record and isinstance(load_learned_policy(out)[0], type(loaded))
     assert config["action_scale"] == action_scale
     obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
@@ -270,7 +273,7 @@ def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end
 
     def spy(out, *args):
         save(out, *args)
-        saves.append((len((out / "progress.csv").read_text().splitlines()) - 1, (out / trainer.POLICY_FILE).is_file()))
+        saves.append((len((out / "progress.csv").read_text().splitlines()) - 1, (out / networks.POLICY_FILE).is_file()))
         load_torch_policy(out)
 
     monkeypatch.setattr(trainer, "SAVE_SECONDS", 0.0)
@@ -355,9 +358,9 @@ def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp
 @pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
 def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_zero(distribution):
     # with every weight of the MLP zeroed its output is 0: the Gaussian's deviation must be exactly the configured one
-    actor = trainer._policy_network(7, 2, 1, [8], False, distribution, 0.3)
+    actor = networks.policy_network(7, 2, hidden=[8], distribution=distribution, initial_scale=0.3)
     with torch.no_grad():
-        for weight in trainer._shared_trunk(actor).parameters():
+        for weight in networks.shared_trunk(actor).parameters():
             weight.zero_()
     out = actor(TensorDict({("vessel", "observation"): torch.randn(5, 1, 7)}, batch_size=[5]))
     torch.testing.assert_close(out["vessel", "scale"], torch.full((5, 1, 2), 0.3))
@@ -365,7 +368,9 @@ def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_ze
 
 
 def test_a_state_independent_scale_starts_at_initial_scale_whatever_the_observation_and_is_learned():
-    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.1, None, "state_independent")
+    actor = networks.policy_network(
+        7, 2, n_agents=3, hidden=[16], distribution="normal", initial_scale=0.1, scale="state_independent"
+    )
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     with torch.no_grad():
         scale = actor(obs)["vessel", "scale"]
@@ -378,10 +383,10 @@ def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_i
     # the same seed builds the same hidden layers; only the output layer differs: loc = gain · (W h), W h = loc₀ − b₀
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     torch.manual_seed(5)
-    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3)
+    plain = networks.policy_network(7, 2, **SMALL)
     torch.manual_seed(5)
-    small = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01)
-    *_, bias = trainer._shared_trunk(plain).parameters()
+    small = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01)
+    *_, bias = networks.shared_trunk(plain).parameters()
     with torch.no_grad():
         loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
     torch.testing.assert_close(loc_small, 0.01 * (loc_plain - bias[:2]))
@@ -394,16 +399,18 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     k = torch.tensor([0.2, 0.05])
     torch.manual_seed(5)
-    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent")
+    plain = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01, scale="state_independent")
     torch.manual_seed(5)
-    scaled = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent", [0.2, 0.05])
+    scaled = networks.policy_network(
+        7, 2, **SMALL, action_head_gain=0.01, scale="state_independent", action_scale=[0.2, 0.05]
+    )
     with torch.no_grad():
         a, b = plain(obs.clone()), scaled(obs.clone())
     torch.testing.assert_close(b["vessel", "loc"], k * a["vessel", "loc"])
     torch.testing.assert_close(b["vessel", "scale"], torch.tensor([0.3 * 0.2, 0.3 * 0.05]).expand(64, 3, 2))
     assert [n for n, _ in scaled.named_parameters()] == [n for n, _ in plain.named_parameters()]
     with pytest.raises(ValueError, match="needs distribution 'normal'"):
-        trainer._policy_network(7, 2, 3, [16], False, "tanh_normal", 0.3, None, "state_dependent", 0.5)
+        networks.policy_network(7, 2, **{**SMALL, "distribution": "tanh_normal"}, action_scale=0.5)
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):

@@ -110,7 +110,7 @@ def run_folder_of(path: str | Path) -> Path:
 #: ``marine_formation_env.trainers`` of ``pyproject.toml`` name the same functions.
 LOADERS = {
     "sb3": "training.learned:load_sb3_run",
-    "torchrl": "training.torchrl_ppo:load_torchrl_run",
+    "torchrl": "training.torchrl_networks:load_torchrl_run",
     "rllib": "training.rllib_ppo:load_rllib_run",
 }
 
