@@ -31,9 +31,7 @@ them as a set:
   paper's law (20), whose sum over the in-neighbours is 0 at agreement. A
   vessel whose neighbours all agree then commands what a vessel that hears
   no one does, so a chain has no steady offset per link for its length to
-  multiply (without it, the ``any_n_speed`` row's earlier policies ended
-  chains of 20 with every follower 0.06–0.11 m off the vessel it hears; with
-  it, three seeds ended them at 0.00 m: docs/results.md).
+  multiply.
 
 Nothing depends on the number of slots, so the weights trained on teams of 3
 to 6 (observations padded to one length with ``observation_slots``) act in a

@@ -25,11 +25,10 @@ every evaluation are unchanged. The
 run's TensorBoard gets ``train/temporal_smoothness_loss`` (the mean distance
 over the update's steps, without λ).
 
-Before commit e841afb the term was a separate pass of optimizer steps after
-PPO's epochs. Adam normalizes each parameter's step by the running size of
-its gradients, so the weight of a loss stepped on its own barely sets the
-size of the step: λ = 1 and λ = 0.1 collapsed the same run alike
-(docs/results.md).
+The term is part of PPO's loss, not a separate pass of optimizer steps:
+Adam normalizes each parameter's step by the running size of its gradients,
+so the weight of a loss stepped on its own would barely set the size of the
+step.
 
 :class:`SmoothnessTerm` is the term itself, for any policy whose mean is a
 differentiable function of the observation.

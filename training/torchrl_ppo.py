@@ -144,8 +144,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
 
     set_composite_lp_aggregate(False).set()
     if cfg["threads"] is not None:
-        # one thread by default, as training.train: on the shared 2-core machine, with other processes running,
-        # two intra-op threads made an iteration several times slower (docs/results.md, training throughput)
+        # one thread by default, as training.train: the networks are small, and on a shared machine more
+        # intra-op threads contend with the simulation (docs/training.md)
         torch.set_num_threads(cfg["threads"])
     seed = cfg["seed"]
     torch.manual_seed(seed)
