@@ -94,7 +94,7 @@ CONFIGS = ROOT / "training" / "configs"
 #: Where ``--publish`` writes results.md and the figures.
 DOCS = ROOT / "docs"
 MARKERS = ("<!-- learned-baselines:start -->", "<!-- learned-baselines:end -->")
-#: First evaluation seed (as ``training.learned.evaluate_run``).
+#: First evaluation seed (``baselines.seeds``, as ``training.learned.evaluate_run``).
 EVAL_SEED = EVALUATION_SEED
 #: The learning issue's targets.
 PERFORMANCE_TARGET, SUCCESS_TARGET, CHANNEL_SUCCESS_TARGET, SMOOTHNESS_TARGET = 0.9, 0.8, 0.9, 3.0

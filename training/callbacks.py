@@ -286,7 +286,7 @@ class BudgetSchedule:
     ``schedule(1 − used)`` with ``used`` the fraction of the budget spent, whichever of SB3's steps (``1 −
     progress_remaining``) and ``seconds`` of wall time since ``start`` runs out first
     (:func:`training.config.budget_fraction`), floored at 0: a ``lin_<x>`` learning rate then reaches 0 at the
-    end of the minutes the learning benchmarks give, as the TorchRL trainer's ``lr_schedule: linear`` does,
+    end of the minutes the learning benchmarks give, as the TorchRL trainer's ``lin_<rate>`` does,
     instead of following an ``n_timesteps`` far beyond what the minutes reach. A constant schedule stays constant.
     """
 
