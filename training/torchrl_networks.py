@@ -122,7 +122,7 @@ def policy_network(
     parameter per action entry, ``exp`` of a log-deviation that starts at ``log(initial_scale)`` (SB3's Gaussian,
     TensorDict's ``AddStateIndependentNormalScale``).
     With ``action_scale`` ≠ 1 a fixed last module multiplies loc and scale by it (per action entry):
-    the Gaussian over the network's units becomes one over the env's (module docstring).
+    the Gaussian over the network's units becomes one over the env's (docs/training.md, ``action_scale``).
     With ``inputs="predicted"`` the network reads :class:`training.inputs.PredictedInputs` of the observation;
     with ``normalize`` its running norm (:func:`running_norm`); with ``dropped``
     an :class:`training.inputs.InputMask` of those entries first.
