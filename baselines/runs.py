@@ -21,10 +21,21 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
-__all__ = ["TRAINER_GROUP", "RunFolderError", "load_run", "run_folder_of", "trainer_of", "trainers"]
+__all__ = [
+    "CONFIG_FILE",
+    "TRAINER_GROUP",
+    "RunFolderError",
+    "load_run",
+    "read_config",
+    "run_folder_of",
+    "trainer_of",
+    "trainers",
+]
 
 #: The entry-point group of the run-folder loaders, one per ``trainer`` name.
 TRAINER_GROUP = "marine_formation_env.trainers"
+#: A run folder's configuration file, with its ``trainer`` field.
+CONFIG_FILE = "config.yaml"
 
 Loader = Callable[..., tuple[Any, dict[str, Any]]]
 
@@ -34,49 +45,59 @@ class RunFolderError(ValueError):
 
 
 def run_folder_of(path: str | Path) -> Path:
-    """The run folder of ``path``: the nearest of ``path`` and its parents that holds a ``config.yaml``.
+    """The run folder of ``path``: the nearest of ``path`` (a folder) or its folder (a file) and their parent and
+    grandparent that holds a ``config.yaml``.
 
-    ``runs/NAME``, ``runs/NAME/model.zip`` and ``runs/NAME/checkpoints/step_1000.zip``
-    all give ``runs/NAME``.
+    ``runs/NAME``, ``runs/NAME/model.zip``, ``runs/NAME/checkpoints/step_1000.zip`` and RLlib's
+    ``runs/NAME/checkpoint/learner_group`` all give ``runs/NAME``.
 
     Raises:
         FileNotFoundError: ``path`` does not exist.
-        RunFolderError: neither ``path`` nor its two parents hold a ``config.yaml``.
+        RunFolderError: none of those folders holds a ``config.yaml``.
     """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no run folder or policy file at {str(path)!r}")
     folder = path if path.is_dir() else path.parent
-    for candidate in (folder, folder.parent):
-        if (candidate / "config.yaml").is_file():
+    for candidate in (folder, folder.parent, folder.parent.parent):
+        if (candidate / CONFIG_FILE).is_file():
             return candidate
-    raise RunFolderError(f"{str(path)!r} is not in a run folder: no config.yaml in {str(folder)!r} or its parent")
+    raise RunFolderError(f"{str(path)!r} is not a run folder: neither it nor its parents have a {CONFIG_FILE}")
+
+
+def read_config(folder: str | Path) -> dict[str, Any]:
+    """The ``config.yaml`` of a run folder: a mapping with a ``trainer`` field that names its trainer.
+
+    Raises:
+        RunFolderError: no ``config.yaml``, not YAML, not a mapping, or no ``trainer`` field (the message
+            names the folder and the field).
+        ImportError: PyYAML is not installed (it comes with every trainer's extra).
+    """
+    try:
+        import yaml  # the trainers' dependency: a run folder exists only where one is installed
+    except ImportError as err:
+        raise ImportError(f"config.yaml needs PyYAML: pip install 'marine-formation-env[train]' ({err})") from err
+    folder = Path(folder)
+    path = folder / CONFIG_FILE
+    if not path.is_file():
+        raise RunFolderError(f"{str(folder)!r} is not a run folder: it has no {CONFIG_FILE}")
+    try:
+        record = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise RunFolderError(f"{str(path)!r} is not readable YAML ({type(err).__name__}: {err})") from None
+    if not isinstance(record, dict):
+        raise RunFolderError(f"{str(path)!r} is not a mapping")
+    if not isinstance(record.get("trainer"), str):
+        raise RunFolderError(
+            f"run folder {str(folder)!r}: {CONFIG_FILE} has no 'trainer' field (one of {sorted(trainers())}); "
+            "it was written before run folders recorded their trainer"
+        )
+    return record
 
 
 def trainer_of(folder: str | Path) -> str:
-    """The ``trainer`` field of a run folder's ``config.yaml``.
-
-    Raises:
-        RunFolderError: the file is not YAML, not a mapping, or has no string ``trainer`` field.
-    """
-    try:
-        import yaml  # the training extras' dependency: a run folder exists only where one is installed
-    except ImportError as err:
-        raise ImportError(
-            f"a run folder's config needs PyYAML: pip install 'marine-formation-env[train]' ({err})"
-        ) from err
-    config_path = Path(folder) / "config.yaml"
-    try:
-        config = yaml.safe_load(config_path.read_text())
-    except yaml.YAMLError as err:
-        raise RunFolderError(f"{config_path} is not YAML ({err})") from None
-    trainer = config.get("trainer") if isinstance(config, dict) else None
-    if not isinstance(trainer, str):
-        raise RunFolderError(
-            f"{config_path} has no 'trainer' field (one of {sorted(trainers())}): was it written by a trainer "
-            "of this package?"
-        )
-    return trainer
+    """The ``trainer`` field of a run folder's ``config.yaml`` (:func:`read_config`)."""
+    return str(read_config(folder)["trainer"])
 
 
 def trainers() -> dict[str, Any]:
@@ -104,8 +125,8 @@ def load_run(path: str | Path, deterministic: bool = True) -> tuple[Any, dict[st
     registered = trainers()
     if trainer not in registered:
         raise RunFolderError(
-            f"{folder / 'config.yaml'} names trainer {trainer!r}, which has no loader; registered: "
-            f"{sorted(registered)} (is the package installed, pip install -e .?)"
+            f"run folder {str(folder)!r}: {CONFIG_FILE}'s trainer must be one of {sorted(registered)}, got "
+            f"{trainer!r} (a trainer is registered when its package is installed: pip install -e .)"
         )
     try:
         loader: Loader = registered[trainer].load()

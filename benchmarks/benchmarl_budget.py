@@ -123,7 +123,7 @@ def run(minutes: float, out: Path, seed: int, episodes: int) -> dict[str, Any]:
     )
     frames = int(experiment.total_frames)
     cfg = {"scenario": task.config["scenario"], "env_kwargs": task.config["overrides"], "eval_episodes": episodes}
-    return evaluate_run(out, policy, cfg, frames, frames * n, round(stop.trained, 3))
+    return evaluate_run(out, policy, cfg, vessel_steps=frames * n, wall_time_s=round(stop.trained, 3))
 
 
 def task_action_dim(env: Any) -> int:

@@ -86,8 +86,8 @@ from baselines.engine import episode_reports
 from baselines.plots import plot_comparison
 from baselines.pretrained import load_pretrained
 from baselines.reference import ReferencePolicy
+from baselines.seeds import evaluation_seeds
 from benchmarks.training_throughput import parse_seeds
-from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_path, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
@@ -104,9 +104,7 @@ CONFIGS = ROOT / "training" / "configs"
 #: Where ``--publish`` writes results.md and the figures.
 DOCS = ROOT / "docs"
 MARKERS = ("<!-- learned-baselines:start -->", "<!-- learned-baselines:end -->")
-#: First evaluation seed (as ``training.learned.evaluate_run``).
-EVAL_SEED = 10_000
-#: The learning issue's targets.
+#: The targets a row is judged on (module docstring).
 PERFORMANCE_TARGET, SUCCESS_TARGET, CHANNEL_SUCCESS_TARGET, SMOOTHNESS_TARGET = 0.9, 0.8, 0.9, 3.0
 
 
@@ -174,14 +172,13 @@ def _run_config(folder: Path) -> dict[str, Any]:
     if not path.is_file():
         return {}
     config = yaml.safe_load(path.read_text()) or {}
-    return dict(config.get(ENV_ID, config))  # an SB3 run's config sits under the env id
+    return dict(config)
 
 
 def _shaping(folder: Path) -> dict[str, Any]:
-    """The reward fields the run's learner trained on at some time: ``train_reward``'s, and those its
-    ``train_reward_switch`` adds (``{}`` for none, or a pipeline without them)."""
-    run = _run_config(folder)
-    return {**(run.get("train_reward") or {}), **((run.get("train_reward_switch") or {}).get("reward") or {})}
+    """The reward fields the run's learner trained on: its ``train_reward`` (``{}`` for none, or a pipeline
+    without one)."""
+    return dict(_run_config(folder).get("train_reward") or {})
 
 
 def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict[str, Any]:
@@ -213,7 +210,7 @@ def evaluate_folder(folder: Path, episodes: int, row: Row | None = None) -> dict
 
 
 def _evaluate_members(policy: Any, env: Any, episodes: int) -> dict[str, Any]:
-    seeds = [EVAL_SEED + k for k in range(episodes)]
+    seeds = evaluation_seeds(episodes)
     policies: dict[str, Any] = {"learned": policy, "reference": ReferencePolicy(env)}
     if not env.config.ideal_observations:
         policies["reference_extrapolate"] = ReferencePolicy(env, extrapolate=True)
@@ -357,8 +354,9 @@ def _curve(folder: Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
         return np.zeros(0), np.zeros(0)
     with path.open(newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if r.get("episode_return") not in (None, "")]
-    return (np.array([float(r["seconds"]) / 60.0 for r in rows]), np.array([float(r["episode_return"]) for r in rows]))
+        rows = [r for r in csv.DictReader(handle) if r.get("episode_return_mean") not in (None, "")]
+    minutes = np.array([float(r["wall_time_s"]) / 60.0 for r in rows])
+    return minutes, np.array([float(r["episode_return_mean"]) for r in rows])
 
 
 def plot_learning_curves(rows: list[Row], records: list[dict[str, Any]], out: Path, path: Path) -> None:
@@ -561,10 +559,6 @@ def _description(row: Row, folder: Path, record: dict[str, Any]) -> str:
     shaping = run.get("train_reward") or {}
     if shaping:
         text += ", trained on a shaped reward (" + ", ".join(f"{k}={v}" for k, v in shaping.items()) + ")"
-    switch = run.get("train_reward_switch")
-    if switch:
-        fields = ", ".join(f"{k}={v}" for k, v in switch["reward"].items())
-        text += f", from {float(switch['after']):.0%} of the budget on with {fields}"
     period = run.get("train_dt")
     if period is not None:
         text += f", deciding every {float(period):g} s in training"

@@ -7,9 +7,9 @@ Example::
 Trains PPO (``training/configs/paper_<level>_ppo.yaml``: the paper's scenario
 with randomized initial states) until the wall-clock budget is spent, then
 runs the learned policy, the reference policy and a uniform random policy on
-the same ``--episodes`` evaluation seeds, 1 000 000, 1 000 001, …
-(``training.callbacks.EVAL_SEED``, the seeds of the evaluations during
-training; ``benchmarks.learned_baselines`` evaluates on 10 000, 10 001, …,
+the same ``--episodes`` seeds, ``baselines.seeds.development_seeds`` (1 000 000,
+1 000 001, …, the seeds of the evaluations during training;
+``benchmarks.learned_baselines`` evaluates on ``evaluation_seeds``, 10 000, 10 001, …,
 so the two report different returns for the same policy), and reports:
 
 * mean ± std of the episode return (≤ 0; 0 is perfect) for each policy;
@@ -46,11 +46,12 @@ from typing import Any
 from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
+from baselines.seeds import development_seeds
 from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
 from marine_formation_env.env import parallel_env
 from training import run_folder
-from training.callbacks import EVAL_SEED, evaluate_policy_episodes
+from training.callbacks import evaluate_policy_episodes
 from training.config import TrainConfigError, apply_overrides, load_config, validate
 from training.learned import ModelPolicy
 from training.train import train
@@ -113,7 +114,6 @@ def run_benchmark(
         seed,
         progress=progress,
         minutes=minutes,
-        config_record={**resolved, "seed": seed},
     )
     wall = time.perf_counter() - start
     env = parallel_env(resolved["scenario"], **resolved["env_kwargs"])
@@ -124,7 +124,8 @@ def run_benchmark(
     }
     if not env.config.ideal_observations:  # stale data: also the reference that extrapolates them
         policies["reference_extrapolate"] = ReferencePolicy(env, extrapolate=True)
-    summaries = {name: summarize(evaluate_policy_episodes(env, p, episodes, EVAL_SEED)) for name, p in policies.items()}
+    seeds = development_seeds(episodes)
+    summaries = {name: summarize(evaluate_policy_episodes(env, p, seeds)) for name, p in policies.items()}
     r = {name: s["return"]["mean"] for name, s in summaries.items()}
     spread = {name: s["final_coordination_spread"]["mean"] for name, s in summaries.items()}
     report = {
@@ -136,7 +137,7 @@ def run_benchmark(
         "wall_time_s": wall,
         "vessel_steps": int(model.num_timesteps),
         "episodes": episodes,
-        "eval_seeds": [EVAL_SEED + k for k in range(episodes)],
+        "eval_seeds": seeds,
         "returns": {name: {"mean": s["return"]["mean"], "std": s["return"]["std"]} for name, s in summaries.items()},
         "performance": r["reference"] / r["learned"] if r["learned"] else float("nan"),
         "normalized": (r["learned"] - r["random"]) / (r["reference"] - r["random"]),

@@ -117,7 +117,7 @@ def _sb3_evaluation(folder: Path, episodes: int) -> dict[str, Any]:
     raw = load_config(CONFIGS / "paper_speed_ppo.yaml")
     cfg = {"scenario": raw.get("scenario", "paper"), "env_kwargs": raw.get("env_kwargs", {}), "eval_episodes": episodes}
     steps = int(bench["vessel_steps"])
-    return evaluate_run(folder, policy, cfg, steps // 3, steps, float(bench["wall_time_s"]))
+    return evaluate_run(folder, policy, cfg, vessel_steps=steps, wall_time_s=float(bench["wall_time_s"]))
 
 
 def run_pipeline(name: str, minutes: float, episodes: int, seed: int, out: Path, eco: str | None) -> dict[str, Any]:
@@ -142,8 +142,8 @@ def run_pipeline(name: str, minutes: float, episodes: int, seed: int, out: Path,
         "pipeline": name,
         "seed": seed,
         "vessel_steps": int(summary["vessel_steps"]),
-        "train_seconds": float(summary["seconds"]),
-        "vessel_steps_per_s": summary["vessel_steps"] / summary["seconds"] if summary["seconds"] else None,
+        "train_seconds": float(summary["wall_time_s"]),
+        "vessel_steps_per_s": summary["vessel_steps"] / summary["wall_time_s"] if summary["wall_time_s"] else None,
         "learned_return": summary["learned_return"],
         "reference_return": summary["reference_return"],
         "learned_success": summary["learned_success"],

@@ -1,23 +1,23 @@
 """The batched simulation: the state of ``B`` formations of ``N`` vessels and its step.
 
-:class:`FormationCore` owns the state ``(B, N, 6)``, the time and the step
+``FormationCore`` owns the state ``(B, N, 6)``, the time and the step
 count, and does, per control period: map the normalized actions to physical
-commands (:mod:`~marine_formation_env.actions`), integrate ``substeps`` RK4
+commands (``actions``), integrate ``substeps`` RK4
 steps of the closed loop (the built-in inner controllers of the action level
 are part of the vector field, so they act at every RK4 stage), then compute
 the masked observations, rewards, terminations and truncations as arrays, with
-the per-element rules of :mod:`~marine_formation_env.rules`. The numba backend
-(:mod:`~marine_formation_env._numba`) runs the same step, channel and
+the per-element rules of ``rules``. The numba backend
+(``_numba``) runs the same step, channel and
 autoreset (``step(restart=…)``) included, as one fused kernel.
 
 Everything else has its own home: the observation layout and bounds
-(:mod:`~marine_formation_env.observations`), the action maps and spaces
-(:mod:`~marine_formation_env.actions`), the backend choice
-(:mod:`~marine_formation_env.backends`), the initial-state draws
-(:func:`~marine_formation_env.scenarios.sample_initial_state`, from a
+(``observations``), the action maps and spaces
+(``actions``), the backend choice
+(``backends``), the initial-state draws
+(``sample_initial_state``, from a
 generator the caller passes in: the core holds none), the channel
-(:mod:`~marine_formation_env.channel`) and the sensor noise
-(:mod:`~marine_formation_env.disturbances`). Every front end (PettingZoo env,
+(``channel``) and the sensor noise
+(``disturbances``). Every front end (PettingZoo env,
 gymnasium views, vector env) is a thin view of this class.
 
 Observation of vessel ``j`` (float32, ``10 + 4·(N−1)`` entries, docs/model.md §7;
@@ -40,22 +40,21 @@ paper's straight path are the quantities named first)::
           3 age of that data                 [s]     (0: ideal links)
 
 On a curved path (``not config.straight``) the core also follows each
-vessel's projection ``ℓ_j`` on the path (:attr:`FormationCore.arc`),
+vessel's projection ``ℓ_j`` on the path (``FormationCore.arc``),
 continuously: a global search at reset, then Newton steps from the previous
 value after every RK4 step (both backends).
 
 With a non-ideal channel, switching topologies or sensor noise
-(``not config.ideal_observations``), a :class:`~marine_formation_env.channel.LinkChannel`
+(``not config.ideal_observations``), a ``LinkChannel``
 sits between the vessels: the slots then hold the last message received from
 ``i`` (its θ_i and ẋ_i at sending, compared with j's own values now) and its
 age, and the link bit is 1 iff the link exists now and has delivered a
-message (module :mod:`marine_formation_env.channel`). With a current, ``u`` and
+message (module ``marine_formation_env.channel``). With a current, ``u`` and
 ``v`` are velocities through the water and ẋ in the messages is inertial.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -87,7 +86,7 @@ from marine_formation_env.dynamics import (
     vessel_rhs,
     wrap_angle,
 )
-from marine_formation_env.errors import ConfigError, checked_array, float_array
+from marine_formation_env.errors import checked_array, float_array
 from marine_formation_env.observations import ObservationLayout, observation_bounds
 from marine_formation_env.paths import PathCoordinates, path_coordinates
 from marine_formation_env.rules import (
@@ -107,7 +106,7 @@ from marine_formation_env.rules import (
     terminal_term,
 )
 from marine_formation_env.scenarios import ScenarioConfig, min_separation
-from marine_formation_env.settings import TRACKING_TERMS, RewardConfig
+from marine_formation_env.settings import TRACKING_TERMS
 from marine_formation_env.streams import channel_streams
 
 __all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
@@ -145,7 +144,7 @@ class StepOutput:
 
 
 def reset_output(observation: np.ndarray, has_commanded_speed: bool) -> StepOutput:
-    """The :class:`StepOutput` of a reset: its observation, and zeros where nothing has happened yet.
+    """The ``StepOutput`` of a reset: its observation, and zeros where nothing has happened yet.
 
     Front ends build ``reset()``'s infos from it with the same code as
     ``step()``'s, so both have the same keys (TorchRL and other wrappers build
@@ -172,10 +171,10 @@ class FormationCore:
     """``B`` formations of ``N`` vessels stepped together (see module docstring).
 
     Args:
-        config: a validated :class:`ScenarioConfig`.
+        config: a validated ``ScenarioConfig``.
         num_envs: number of formations ``B``.
         backend: ``"numpy"`` (the reference implementation), ``"numba"`` (one
-            fused compiled kernel per step, :mod:`marine_formation_env._numba`,
+            fused compiled kernel per step, ``marine_formation_env._numba``,
             which compiles the same model and controller functions; results
             agree with the numpy path to floating-point rounding, not bit for
             bit, since numpy's vectorized transcendental functions and libm's
@@ -188,9 +187,9 @@ class FormationCore:
         state: ``(B, N, 6)`` float64, columns ``x, y, psi, u, v, r``.
         time: ``(B,)`` simulated time [s].
         steps: ``(B,)`` control periods since reset.
-        channel: the :class:`~marine_formation_env.channel.LinkChannel`
+        channel: the ``LinkChannel``
             between the vessels, or None with the paper's ideal links.
-        sensor_noise: the :class:`~marine_formation_env.disturbances.SensorNoiseSource`
+        sensor_noise: the ``SensorNoiseSource``
             of the vessels' measurements of themselves, or None without noise.
     """
 
@@ -263,29 +262,12 @@ class FormationCore:
         instant: the state plus sensor noise (the state itself without noise)."""
         return self.state if self._measured is None else self._measured
 
-    def set_reward(self, reward: RewardConfig) -> None:
-        """Charge the following steps with ``reward`` instead of the scenario's reward.
-
-        Nothing else changes: the dynamics, observations and terminations are
-        the scenario's, and formations running keep running. For a learner
-        whose reward changes during training (``training.torchrl_ppo``'s
-        ``train_reward_switch``); ``config.reward`` is ``reward`` afterwards.
-
-        Raises:
-            ConfigError: ``reward`` is not a :class:`~marine_formation_env.settings.RewardConfig`.
-        """
-        if not isinstance(reward, RewardConfig):
-            raise ConfigError(f"set_reward needs a RewardConfig, got {reward!r}")
-        self.config = dataclasses.replace(self.config, reward=reward)
-        if self._kernel is not None:
-            self._kernel.set_reward(self.config)
-
     # ------------------------------------------------------------------ reset
     def seed_channel(self, seeds: Sequence[int | None], env_ids: np.ndarray | None = None) -> None:
         """Seed the channel stream (loss, delays, failures, sensor noise) of formations ``env_ids``.
 
         One seed per formation (all formations if ``env_ids`` is None); ``None``
-        keeps that formation's stream running. Call it before :meth:`reset`. A
+        keeps that formation's stream running. Call it before ``reset``. A
         no-op with the paper's ideal links, which draw nothing.
         """
         index = np.arange(self.num_envs) if env_ids is None else np.asarray(env_ids)
@@ -344,7 +326,7 @@ class FormationCore:
         """Advance every formation by one control period, or restart some of them (autoreset).
 
         Formations in ``restart`` start a new episode from ``initial_state``
-        instead of stepping, exactly as :meth:`reset` would start it: their
+        instead of stepping, exactly as ``reset`` would start it: their
         actions are ignored and their output is the new episode's first
         observation, with zero reward and nothing terminated or truncated.
         The compiled backend does this inside its kernel, so formations that
@@ -540,10 +522,10 @@ class FormationCore:
     def _closed_loop_curved(
         self, commands: dict[str, np.ndarray], sea: Callable[[float], tuple[Any, Any] | None]
     ) -> Callable[[float, np.ndarray], np.ndarray]:
-        """:meth:`closed_loop` on a curved path (``speed``, ``guidance``): the loops of docs/paths.md.
+        """``closed_loop`` on a curved path (``speed``, ``guidance``): the loops of docs/paths.md.
 
         At every RK4 stage the vessels' path coordinates are computed from the
-        stage's state, projecting from the step's start (:attr:`arc`, which
+        stage's state, projecting from the step's start (``arc``, which
         the step moves on only after each RK4 step). At
         ``guidance`` the heading command is relative to the path, ``ψ_d = γ(ℓ) + β_d``.
         """

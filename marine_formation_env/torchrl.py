@@ -4,7 +4,7 @@
 is a multi-agent TorchRL environment in the layout of TorchRL's ``VmasEnv``:
 every formation of the batch is one entry of the tensordict, its vessels are
 one agent group ``"vessel"``, and no Python loop runs over formations or vessels
-(one :class:`~marine_formation_env.core.FormationCore` step per call, the
+(one ``FormationCore`` step per call, the
 numba kernel when it is installed). Install with the ``torchrl`` extra::
 
     pip install -c constraints.txt -e ".[torchrl]"
@@ -50,7 +50,7 @@ resets ``s`` ∈ [0, 1] of the way from the formation on its lanes to the
 scenario's initial state, noise included (a curriculum; 1 restores it).
 
 Physics, rewards and observations are the core's: this module only lays them
-out as tensors (:mod:`marine_formation_env.frontend` holds the rules every
+out as tensors (``marine_formation_env.frontend`` holds the rules every
 front end shares).
 """
 
@@ -71,7 +71,6 @@ from marine_formation_env.frontend import (
     vessel_infos,
 )
 from marine_formation_env.scenarios import ScenarioConfig
-from marine_formation_env.settings import RewardConfig
 
 try:
     import torch
@@ -102,19 +101,19 @@ class MarineFormationTorchEnv(EnvBase):
     Args:
         num_envs: number of formations B (the env's ``batch_size`` is ``[B]``).
         scenario: scenario name (``**overrides`` as for ``parallel_env``), or a
-            ready :class:`~marine_formation_env.scenarios.ScenarioConfig` (no overrides).
+            ready ``ScenarioConfig`` (no overrides).
         device: where the tensordicts live; the simulation runs on the CPU.
-        backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see :class:`~marine_formation_env.core.FormationCore`).
+        backend: ``"numpy"``, ``"numba"`` or ``"auto"`` (see ``FormationCore``).
         render_mode: ``"rgb_array"`` to render formation 0 (``render()``), or None.
         group: the name of the agent group; ``"agents"`` gives ``VmasEnv``'s keys,
             so scripts written for VMAS (TorchRL's multi-agent recipes) run unchanged.
-        seed: if given, :meth:`set_seed` is called with it (as ``VmasEnv`` does).
+        seed: if given, ``set_seed`` is called with it (as ``VmasEnv`` does).
         render_width: width of rendered frames in pixels (≥ 320; the height
             follows the workspace, both even). Recorders keep every frame of an
             episode in memory: 800 frames of 640 × 352 take 0.5 GB.
         **overrides: any field of the scenario's settings (``action_level``,
             ``n_vessels``, ``topology``, ``channel``, ...); an unknown key raises
-            :class:`~marine_formation_env.errors.UnknownSettingError` (a ``TypeError``).
+            ``UnknownSettingError`` (a ``TypeError``).
 
     Attributes:
         config: the resolved scenario.
@@ -255,7 +254,7 @@ class MarineFormationTorchEnv(EnvBase):
         ``scale`` multiplies every initial error of the nominal state (across
         its lane, heading relative to the path, along-path coordination) and
         the ``init_noise`` half-widths
-        (:func:`~marine_formation_env.scenarios.spread_config`): 0 starts every
+        (``spread_config``): 0 starts every
         formation in formation, 1 (the default) is the scenario's. For a
         curriculum over the initial state; formations already running keep
         their episode, and seeding is unchanged.
@@ -264,18 +263,6 @@ class MarineFormationTorchEnv(EnvBase):
             ConfigError: ``scale`` is not a number in [0, 1].
         """
         self._initial.set_spread(scale)
-
-    def set_reward(self, reward: RewardConfig) -> None:
-        """Charge the following steps with ``reward`` (:meth:`FormationCore.set_reward
-        <marine_formation_env.core.FormationCore.set_reward>`); ``config.reward`` is ``reward`` afterwards.
-
-        For a reward that changes during training; formations running keep their episode.
-
-        Raises:
-            ConfigError: ``reward`` is not a :class:`~marine_formation_env.settings.RewardConfig`.
-        """
-        self.core.set_reward(reward)
-        self.config = self.core.config
 
     def _reset_mask(self, tensordict: TensorDictBase | None) -> np.ndarray | None:
         """The formations to restart, ``(B,)`` bool, from a ``"_reset"`` entry (root or group); None: all."""

@@ -29,11 +29,9 @@ from marine_formation_env import parallel_env
 from marine_formation_env.rules import (
     CURVATURE,
     CURVATURE_AHEAD,
-    DESIRED_SPEED,
     LANE_OFFSET,
     OWN_SIZE,
     SLOT_SIZE,
-    SURGE,
 )
 from training import train as train_module
 from training.config import TrainConfigError, load_config, team_overrides, validate
@@ -78,36 +76,6 @@ def test_the_numpy_slot_features_are_the_torch_extractor_s():
         theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
     np.testing.assert_allclose(slot_features(obs, _numpy_weights(extractor)), theirs, atol=2e-5)  # float32 rounding
     assert theirs.shape == (64, 48)
-
-
-def test_the_own_speed_error_input_is_tanh_of_u_minus_u_d_over_its_scale_in_torch_and_numpy():
-    torch.manual_seed(0)
-    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 3,), np.float32)
-    extractor = SlotFeatures(box, hidden=8, speed_error=0.2)
-    assert extractor.own[0].in_features == OWN_SIZE + 1 and extractor.message[0].in_features == OWN_SIZE + 1 + SLOT_SIZE
-    # the own branch reads the new input alone, with weight 3: its first unit is tanh(3·tanh((u − u_d)/0.2))
-    with torch.no_grad():
-        extractor.own[0].weight.zero_()
-        extractor.own[0].bias.zero_()
-        extractor.own[0].weight[0, OWN_SIZE] = 3.0
-    obs = _observations(np.random.default_rng(2), 32, 3)
-    obs[:, SURGE] = 4.0
-    obs[:, DESIRED_SPEED] = 4.0 + np.linspace(-1.0, 1.0, 32)  # u − u_d from +1 to −1 m/s
-    with torch.no_grad():
-        theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
-    expected = np.tanh(3.0 * np.tanh((obs[:, SURGE] - obs[:, DESIRED_SPEED]) / 0.2))
-    np.testing.assert_allclose(theirs[:, 0], expected, atol=1e-6)  # float32 rounding of values ≤ 1
-    # the exporter's weights carry the scale, and numpy computes the same features
-    holder = type("Net", (), {"features_extractor": extractor})()
-    weights = _sb3_slot_features(holder)
-    assert float(weights["speed_error_scale"]) == pytest.approx(0.2)
-    np.testing.assert_allclose(slot_features(obs, weights), theirs, atol=2e-5)
-    # off by default, and a network saved without it keeps its parameter names (old model.zip files load strictly)
-    plain = SlotFeatures(box, hidden=8)
-    assert "speed_error_scale" not in plain.state_dict() and plain.own[0].in_features == OWN_SIZE
-    for bad in (0.0, -0.1, float("inf"), True, "0.2"):
-        with pytest.raises(ValueError, match=f"speed_error must be a speed scale > 0 \\[m/s\\] or None, got {bad!r}"):
-            SlotFeatures(box, speed_error=bad)
 
 
 def _agreeing(rng: np.random.Generator, batch: int, slots: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,7 +128,7 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
     """The messages written out from the definitions (module docstring), on aged links with Δẋ ≠ 0."""
     torch.manual_seed(5)
     box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 4,), np.float32)
-    extractor = SlotFeatures(box, hidden=8, speed_error=0.2, zero_at_agreement=True)
+    extractor = SlotFeatures(box, hidden=8, zero_at_agreement=True)
     weights = _sb3_slot_features(type("Net", (), {"features_extractor": extractor})())
     rng = np.random.default_rng(5)
     obs = _observations(rng, 16, 4)
@@ -169,13 +137,7 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
     e, psi, u, v, kappa, lane = own[:, 0], own[:, 1], own[:, 2], own[:, 3], own[:, CURVATURE], own[:, LANE_OFFSET]
     x_dot = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (lane + e))
     gap = slot[..., 1] - (x_dot[:, None] - slot[..., 2]) * slot[..., 3]  # Δθ predicted to now [m]
-    own_in = np.concatenate(
-        [
-            np.column_stack([*own[:, :LANE_OFFSET].T, kappa * lane]) / OWN_SCALE,
-            np.tanh((u - own[:, DESIRED_SPEED]) / 0.2)[:, None],
-        ],
-        axis=1,
-    )
+    own_in = np.column_stack([*own[:, :LANE_OFFSET].T, kappa * lane]) / OWN_SCALE
     link, vel, age = slot[..., 0], slot[..., 2] / SLOT_SCALE[2], slot[..., 3] / SLOT_SCALE[3]
 
     def phi(*columns):
@@ -200,8 +162,7 @@ def test_with_every_option_each_message_is_phi_of_the_slot_minus_phi_of_an_agree
     assert sorted(again.features) == sorted(weights)
     for name, value, message in (
         ("zero_at_agreement", np.array(0.0), "zero_at_agreement must be 1 if present"),
-        ("speed_error_scale", np.array(-1.0), "speed_error_scale must be one number > 0"),
-        ("speed_error_scale", np.array(np.nan), "speed_error_scale must be one number > 0"),
+        ("speed_error_scale", np.array(0.2), "unknown \\['speed_error_scale'\\]"),  # an option no longer read
         ("agreement", np.array(1.0), "unknown \\['agreement'\\]"),
     ):
         with pytest.raises(ValueError, match=message):

@@ -64,7 +64,7 @@ def dropped_run(tmp_path_factory):
     """A tiny force-level run of the paper's scenario that drops the lane offset, the link bits and the ages."""
     run = tmp_path_factory.mktemp("drop") / "run"
     argv = ["--seed", "3", "--out", str(run), "--no-progress", "--set", "env_kwargs.action_level=force"]
-    for item in ["num_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "epochs=1",
+    for item in ["n_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "n_epochs=1",
                  "eval_episodes=1", "hidden=[16, 16]", "normalize_observations=true", "distribution=normal",
                  "scale=state_independent", f"drop_inputs={DROPPED!r}"]:  # fmt: skip
         argv += ["--set", item]

@@ -368,8 +368,8 @@ def saved_run(tmp_path_factory):
     venv = VecNormalize(SharedPolicyVecEnv(1, "paper", **kwargs))
     PPO("MlpPolicy", venv, n_steps=8, batch_size=8, device="cpu").save(folder / "model.zip")
     venv.save(str(folder / "vecnormalize.pkl"))
-    config = {"algo": "ppo", "scenario": "paper", "env_kwargs": kwargs, "seed": 0}
-    (folder / "config.yaml").write_text(yaml.safe_dump({ENV_ID: config}))
+    config = {"trainer": "sb3", "env_id": ENV_ID, "seed": 0, "algo": "ppo", "scenario": "paper", "env_kwargs": kwargs}
+    (folder / "config.yaml").write_text(yaml.safe_dump(config))
     return folder
 
 

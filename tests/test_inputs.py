@@ -95,7 +95,7 @@ def test_an_exported_run_with_predicted_inputs_acts_as_its_torchrl_policy(tmp_pa
 
     run = tmp_path / "run"
     argv = ["--out", str(run), "--no-progress", "--set", "scenario=acoustic", "--set", "inputs=predicted"]
-    for item in ["num_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "epochs=1",
+    for item in ["n_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "n_epochs=1",
                  "eval_episodes=1", "hidden=[16, 16]", "env_kwargs.horizon=4.0", "env_kwargs.action_level=speed",
                  "distribution=normal"]:  # fmt: skip
         argv += ["--set", item]

@@ -194,9 +194,6 @@ def test_a_run_s_reward_shaping_is_read_from_its_config(tmp_path):
     assert lb._shaping(tmp_path) == {}
     (tmp_path / "config.yaml").write_text("algo: mappo\ntrain_reward: {sigma_coordination: 5.0}\n")
     assert lb._shaping(tmp_path) == {"sigma_coordination": 5.0}
-    switched = "train_reward: {}\ntrain_reward_switch: {after: 0.4, reward: {fine_share: 0.3}}\n"
-    (tmp_path / "config.yaml").write_text(switched)
-    assert lb._shaping(tmp_path) == {"fine_share": 0.3}  # its later returns are in the switched reward's units
 
 
 def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypatch):
@@ -213,11 +210,6 @@ def test_a_policy_s_description_says_how_its_run_was_trained(tmp_path, monkeypat
     assert text.endswith("deciding every 1 s in training, not reading lane_offset, linked, age")
     (tmp_path / "config.yaml").write_text("algo: mappo\ndrop_inputs: []\n")
     assert "reading" not in lb._description(lb.ROWS["paper_force"], tmp_path, record)
-    switch = "train_reward_switch: {after: 0.35, reward: {fine_share: 0.3, fine_terms: [coordination]}}"
-    (tmp_path / "config.yaml").write_text(f"algo: mappo\n{switch}\n")
-    text = lb._description(lb.ROWS["paper_force"], tmp_path, record)
-    assert text.endswith("from 35% of the budget on with fine_share=0.3, fine_terms=['coordination']")
-    assert "shaped reward (" not in text
     (tmp_path / "config.yaml").write_text("algo: ppo\ntemporal_smoothness: 0.01\n")
     assert lb._description(lb.ROWS["paper_force"], tmp_path, record).endswith("temporal smoothness term λ=0.01")
     (tmp_path / "config.yaml").write_text("algo: ppo\ntemporal_smoothness: 0.0\n")
@@ -238,7 +230,7 @@ def test_the_learning_curves_draw_the_reference_only_where_the_learner_trained_o
             # minutes 1, 3, 4 (the row at 2 min has no finished episode)
             returns = [base - 300, "", base - 200, base - 100]
             rows = "".join(f"{60 * (k + 1)},{value}\n" for k, value in enumerate(returns))
-            (folder / "progress.csv").write_text("seconds,episode_return\n" + rows)
+            (folder / "progress.csv").write_text("wall_time_s,episode_return_mean\n" + rows)
             records.append({"row": name, "seed": seed, "learned": {}, "reference": {"return": -87.0}})
     figures = []
     monkeypatch.setattr(lb, "_save_figure", lambda fig, path: figures.append(fig))

@@ -54,6 +54,7 @@ def test_an_override_reaches_the_run_and_its_recorded_config(tmp_path):
     args = ["--minutes", "1", "--vessel-steps", "384", "--episodes", "1", "--out", str(out), "--quiet"]
     args += ["--set", "n_envs=2", "--set", "n_steps=64", "--set", "batch_size=64", "--set", "learning_rate=lin_1e-3"]
     assert learning.main(args) == 0
-    recorded = yaml.safe_load((out / "config.yaml").read_text())[ENV_ID]
+    recorded = yaml.safe_load((out / "config.yaml").read_text())
+    assert recorded["trainer"] == "sb3" and recorded["env_id"] == ENV_ID
     assert recorded["learning_rate"] == "lin_1e-3" and recorded["n_envs"] == 2
     assert recorded["n_timesteps"] == 384  # the budget's ceiling still applies on top of the overrides

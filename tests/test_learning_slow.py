@@ -11,8 +11,9 @@ pytest.importorskip("stable_baselines3")
 from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
+from baselines.seeds import development_seeds
 from marine_formation_env.env import parallel_env
-from training.callbacks import EVAL_SEED, evaluate_policy_episodes
+from training.callbacks import evaluate_policy_episodes
 from training.config import apply_overrides, load_config, validate
 from training.learned import ModelPolicy
 from training.train import train
@@ -28,7 +29,7 @@ def test_ppo_speed_level_learns_most_of_the_way_to_the_reference(tmp_path: Path)
     model = train(resolved, tmp_path / "run", seed=0, progress=False)
     env = parallel_env(resolved["scenario"], **resolved["env_kwargs"])
     returns = {
-        name: summarize(evaluate_policy_episodes(env, policy, 4, EVAL_SEED))["return"]["mean"]
+        name: summarize(evaluate_policy_episodes(env, policy, development_seeds(4)))["return"]["mean"]
         for name, policy in {
             "learned": ModelPolicy(model, model.get_vec_normalize_env()),
             "reference": ReferencePolicy(env),

@@ -168,8 +168,9 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
     path = export_run(run, "sb3_tiny", "smoke", tmp_path / "shipped")
     exported, info = load_pretrained("sb3_tiny", tmp_path / "shipped")
     assert path.stat().st_size < 50_000
-    # no closing evaluation in an SB3 run: the export ran the trained network and the reference on 10 seeds
-    assert info.evaluation["seeds"] == list(range(10_000, 10_010)) and len(info.evaluation["learned_returns"]) == 10
+    # the header carries the run's closing evaluation (evaluation.json: eval_episodes=1 on the evaluation seeds)
+    assert info.evaluation == json.loads((run / "evaluation.json").read_text())
+    assert info.evaluation["seeds"] == [10_000] and len(info.evaluation["learned_returns"]) == 1
     assert (info.scenario, info.action_level, info.n_vessels, info.training["pipeline"]) == ("paper", "speed", 3, "sb3")
     original, _ = load_learned_policy(run)
     obs = np.stack([o for o, _ in (_observations(s) for s in range(4))]).reshape(-1, info.observation_dim)
@@ -195,7 +196,7 @@ def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path
 
     run = tmp_path / "run"
     argv = ["--out", str(run), "--no-progress"]
-    for item in ["num_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "epochs=1",
+    for item in ["n_envs=4", "frames_per_batch=40", "total_frames=80", "minibatch_size=20", "n_epochs=1",
                  "eval_episodes=1", "hidden=[16, 16]", "env_kwargs.horizon=4.0", "env_kwargs.action_level=speed",
                  "normalize_observations=true", f"distribution={distribution}", f"scale={scale}",
                  f"action_scale={action_scale}"]:  # fmt: skip

@@ -49,9 +49,12 @@ def test_sweep_without_a_cluster_at_the_address_says_so(tmp_path, capsys):
     [
         ("num_env_runnerz=2", "unknown key(s) ['num_env_runnerz']"),
         ("num_env_runners=-1", "num_env_runners must be a whole number ≥ 0, got -1"),
-        ("lambda=1.5", "lambda must lie in [0, 1], got 1.5"),
+        ("gae_lambda=1.5", "gae_lambda must lie in [0, 1], got 1.5"),
+        ("lambda=0.9", "the key 'lambda' is now 'gae_lambda'"),
+        ("minibatch_size=600", "the key 'minibatch_size' is now 'batch_size'"),
+        ("num_envs_per_env_runner=2", "the key 'num_envs_per_env_runner' is now 'n_envs'"),
         ("env_runner_resources={worker_node: 0}", "env_runner_resources must map resource names to amounts > 0"),
-        ("minibatch_size=100000", "minibatch_size = 100000 vessel-steps exceeds a batch of 4000 × 3"),
+        ("batch_size=100000", "batch_size = 100000 vessel-steps exceeds a batch of 4000 × 3"),
         ("env_kwargs.action_levl=speed", "action_levl"),
     ],
 )
@@ -84,7 +87,7 @@ export RAY_AUTH_MODE=token  # every process of the cluster and its drivers prese
 "$RAY" start --address=127.0.0.1:{port} --num-cpus=2 --resources='{{"worker_node": 2}}' --disable-usage-stats
 trap '"$RAY" stop --force' EXIT
 $PYTHON -m training.rllib_ppo --config training/configs/rllib/paper_speed_ppo.yaml --address 127.0.0.1:{port} \\
-    --set iterations=2 --set train_batch_size=800 --set minibatch_size=600 --set eval_episodes=1 \\
+    --set iterations=2 --set train_batch_size=800 --set batch_size=600 --set eval_episodes=1 \\
     --set env_runner_resources.worker_node=1 --out {run} --no-progress
 $PYTHON -m baselines.evaluate --policy {run} --policy reference --scenario paper --set action_level=speed \\
     --episodes 1 --json {evaluation} --quiet
@@ -99,7 +102,7 @@ $PYTHON -m baselines.evaluate --policy {run} --policy reference --scenario paper
     assert len(workers) == 1 and {info["address"] for info in cluster["nodes"].values()} == {"127.0.0.1"}
     assert len(cluster["env_runners"]) == 2 and set(cluster["env_runners"]) == workers
     rows = (run / "progress.csv").read_text().splitlines()
-    assert len(rows) == 3 and rows[-1].startswith("2,1600,4800,")
+    assert len(rows) == 3 and rows[-1].startswith("4800,") and rows[-1].endswith(",2,1600")
     report = json.loads(evaluation.read_text())
     learned = report["policies"][str(run)]["summary"]["return"]["mean"]
     assert math.isfinite(learned) and "reference" in report["policies"]

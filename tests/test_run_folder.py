@@ -6,7 +6,7 @@ instants and once in the middle of a checkpoint write); PyYAML's own error
 marks for malformed YAML; SB3's loaders (``PPO.load``, ``pickle``) for what
 "readable" means; and, for the best model, a fresh evaluation of
 ``best_model.zip`` on the evaluation seeds (``training.callbacks`` documents
-that evaluation is deterministic: seeds ``EVAL_SEED + k``, deterministic actions).
+that evaluation is deterministic: the development seeds, deterministic actions).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -34,9 +35,10 @@ from stable_baselines3 import PPO
 
 import marine_formation_env
 from baselines.metrics import summarize
+from baselines.seeds import DEVELOPMENT_SEED, development_seeds
 from training import run_folder
 from training import train as train_module
-from training.callbacks import EVAL_SEED, evaluate_policy_episodes
+from training.callbacks import evaluate_policy_episodes
 from training.config import TrainConfigError, load_config, validate
 from training.learned import load_learned_policy
 
@@ -55,6 +57,7 @@ ARTIFACTS = (
     "best_vecnormalize.pkl",
     "best_model.json",
     "evaluations.csv",
+    "evaluation.json",
     "tb",
     "checkpoints",
 )
@@ -140,11 +143,11 @@ def checkpoint_steps(folder: Path) -> list[int]:
 
 def reevaluate_best(folder: Path) -> float:
     """Mean learned return of ``best_model.zip`` (+ ``best_vecnormalize.pkl``) on the run's evaluation seeds."""
-    config = yaml.safe_load((folder / "config.yaml").read_text())[ENV_ID]
+    config = yaml.safe_load((folder / "config.yaml").read_text())
     policy, _ = load_learned_policy(folder / "best_model.zip")
     env = marine_formation_env.parallel_env(config["scenario"], **config["env_kwargs"])
-    episodes = evaluate_policy_episodes(env, policy, config["eval_episodes"], EVAL_SEED)
-    assert [e["seed"] for e in episodes] == [EVAL_SEED + k for k in range(config["eval_episodes"])]
+    episodes = evaluate_policy_episodes(env, policy, development_seeds(config["eval_episodes"]))
+    assert [e["seed"] for e in episodes] == [DEVELOPMENT_SEED + k for k in range(config["eval_episodes"])]
     return float(summarize(episodes)["return"]["mean"])
 
 
@@ -436,7 +439,7 @@ def test_overwrite_replaces_the_previous_run_and_keeps_other_files(run_copy, cap
     rows = evaluation_rows(run_copy)
     assert [int(r["timesteps"]) for r in rows] == [150, 300]
     assert not old_wall & {row["wall_time"] for row in rows}
-    assert yaml.safe_load((run_copy / "config.yaml").read_text())[ENV_ID]["seed"] == 3
+    assert yaml.safe_load((run_copy / "config.yaml").read_text())["seed"] == 3
     assert 300 <= PPO.load(run_copy / "model.zip", device="cpu").num_timesteps < 300 + 48  # whole rollouts
 
 
@@ -476,7 +479,7 @@ def test_resume_with_the_same_config_may_change_the_resumable_keys(run_copy, cap
     code, err = run_main([*args, "--resume", "--seed", "0", "--out", str(run_copy)], capsys)
     assert code == 0, err
     assert "resuming from" in err and "model_900_steps.zip at 900 steps" in err
-    cfg = yaml.safe_load((run_copy / "config.yaml").read_text())[ENV_ID]
+    cfg = yaml.safe_load((run_copy / "config.yaml").read_text())
     assert (cfg["n_timesteps"], cfg["eval_freq"], cfg["checkpoint_freq"], cfg["seed"]) == (1050, 300, 300, 0)
     assert PPO.load(run_copy / "model.zip", device="cpu").num_timesteps >= 1050  # 1092: whole rollouts of 48
     # the new frequencies are in force: at 150 there would be a checkpoint and an evaluation at 1050
@@ -590,6 +593,8 @@ def test_train_api_keeps_working(tmp_path, capsys):
     model = train_module.train(resolved, tmp_path / "api", seed=0, progress=False)
     assert model.num_timesteps >= 150
     assert sorted(p.name for p in (tmp_path / "api").iterdir() if p.name != "tb") == [
+        "config.yaml",
+        "evaluation.json",
         "model.zip",
         "progress.csv",
         "vecnormalize.pkl",
@@ -686,7 +691,7 @@ sys.exit(main(sys.argv[1:]))
 
 def assert_run_folder_consistent(out: Path) -> None:
     """Every file under its final name is complete; evaluations are monotone and never beat the best."""
-    assert load_config(out / "config.yaml")["seed"] == 0
+    assert run_folder.read_config(out)["seed"] == 0
     for checkpoint in run_folder.list_checkpoints(out):
         assert run_folder.checkpoint_problem(checkpoint, needs_stats=True) is None, checkpoint
     rows = evaluation_rows(out) if (out / "evaluations.csv").exists() else []
@@ -773,3 +778,44 @@ def test_sigkill_at_random_points_never_loses_the_run(tmp_path):
     assert best["return_learned"] >= max(float(r["return_learned"]) for r in rows)
     # best_model.zip is the model that scored it: a fresh evaluation on the evaluation seeds reproduces the score
     assert reevaluate_best(out) == pytest.approx(best["return_learned"], rel=1e-12)
+
+
+# =========================================================================== the run-folder contract
+
+
+def test_a_run_folder_names_its_trainer_and_loads_by_it(run_copy):
+    from training.learned import load_sb3_run
+
+    record = run_folder.read_config(run_copy)
+    assert list(record)[:3] == ["trainer", "env_id", "seed"] and record["trainer"] == "sb3"
+    policy, config = load_sb3_run(run_copy)
+    assert config == record and policy.observation_dim == 10 + 4 * 2
+    again, _ = load_learned_policy(run_copy)
+    obs = np.random.default_rng(0).uniform(-5, 5, (4, policy.observation_dim)).astype(np.float32)
+    np.testing.assert_array_equal(again.act_batch(obs), policy.act_batch(obs))
+
+
+def test_a_run_folder_without_its_trainer_is_refused_naming_the_folder_and_the_field(run_copy):
+    record = yaml.safe_load((run_copy / "config.yaml").read_text())
+    del record["trainer"]
+    (run_copy / "config.yaml").write_text(yaml.safe_dump(record))
+    message = f"run folder '{run_copy}': config.yaml has no 'trainer' field"
+    with pytest.raises(run_folder.RunFolderError, match=re.escape(message)):
+        load_learned_policy(run_copy)
+    with pytest.raises(run_folder.RunFolderError, match="'trainer' field"):
+        load_learned_policy(run_copy / "model.zip")
+    (run_copy / "config.yaml").write_text(yaml.safe_dump({**record, "trainer": "keras"}))
+    with pytest.raises(
+        run_folder.RunFolderError, match="trainer must be one of \\['rllib', 'sb3', 'torchrl'\\], got 'keras'"
+    ):
+        load_learned_policy(run_copy)
+    (run_copy / "config.yaml").unlink()
+    with pytest.raises(run_folder.RunFolderError, match=rf"'{run_copy}' is not a run folder: .* config\.yaml"):
+        load_learned_policy(run_copy)
+
+
+@pytest.mark.parametrize(("key", "new"), [("num_envs", "n_envs"), ("lr", "learning_rate"), ("lmbda", "gae_lambda")])
+def test_an_old_key_is_refused_naming_its_new_name(tmp_path, capsys, key, new):
+    code, err = run_main([*TINY, "--set", f"{key}=1", "--out", str(tmp_path / "run")], capsys)
+    one_line_error(code, err, f"the key '{key}' is now '{new}'")
+    assert not (tmp_path / "run").exists()

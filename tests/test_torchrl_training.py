@@ -8,7 +8,6 @@ promises; one-line CLI errors naming the bad value.
 
 from __future__ import annotations
 
-import csv
 import json
 import subprocess
 import sys
@@ -16,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 from conftest import record_calls
 
 torch = pytest.importorskip("torch")
@@ -24,23 +24,26 @@ pytest.importorskip("torchrl")
 from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
+import training.torchrl_networks as networks  # noqa: E402
 import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
 from marine_formation_env.scenarios import make_config  # noqa: E402
 from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
 from training.config import load_config  # noqa: E402
+from training.learned import load_learned_policy  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
 HEADER = (
-    "frames,vessel_steps,seconds,mean_reward,episode_return,episodes,lr,kl,updates,initial_spread,smoothness,"
-    "reward_switched"
+    "vessel_steps,wall_time_s,episode_return_mean,episodes,frames,mean_reward,learning_rate,kl,updates,initial_spread"
 )
+#: A small actor of 3 vessels: keyword arguments of ``policy_network`` beside the sizes.
+SMALL = {"n_agents": 3, "hidden": [16], "distribution": "normal", "initial_scale": 0.3}
 TINY = [
-    "num_envs=4",
+    "n_envs=4",
     "frames_per_batch=40",
     "total_frames=80",
     "minibatch_size=20",
-    "epochs=1",
+    "n_epochs=1",
     "eval_episodes=2",
     "hidden=[16]",
     "env_kwargs.horizon=4.0",
@@ -85,11 +88,18 @@ def test_two_iterations_write_a_loadable_policy_that_acts_like_torchrl_s_determi
     progress = (out / "progress.csv").read_text().splitlines()
     assert progress[0] == HEADER and len(progress) == 3  # two iterations
     summary = json.loads((out / "evaluation.json").read_text())
-    assert summary["frames"] == 80 and summary["vessel_steps"] == 240
+    assert summary["vessel_steps"] == 240 and summary["seeds"] == [10_000, 10_001]
+    assert int(progress[-1].split(",")[4]) == 80  # frames
     assert np.isfinite(summary["learned_return"]) and summary["learned_return"] < 0
     assert summary["reference_return"] < 0
     policy, config = load_torch_policy(out)
     assert config["algo"] == algo and config["seed"] == 3 and config["scale"] == scale
+    record = yaml.safe_load((out / "config.yaml").read_text())
+    assert (
+        record["trainer"] == "torchrl" and {k: v for k, v in record.items() if k not in ("trainer", "env_id")} == config
+    )
+    loaded, run_config = networks.load_torchrl_run(out)
+    assert run_config == record and isinstance(load_learned_policy(out)[0], type(loaded))
     assert config["action_scale"] == action_scale
     obs = np.random.default_rng(0).uniform(-5, 5, (6, 3, policy.observation_dim)).astype(np.float32)
     mine = policy.act_batch(obs)
@@ -147,23 +157,32 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
     ("item", "message"),
     [
         ("algo=dqn", "algo must be one of ['mappo', 'ippo'], got 'dqn'"),
-        ("epochs=0", "epochs must be a whole number ≥ 1, got 0"),
+        ("n_epochs=0", "n_epochs must be a whole number ≥ 1, got 0"),
         ("gamma=1.5", "gamma must lie in [0, 1], got 1.5"),
         ("hidden=fish", "hidden must be a non-empty list of whole numbers ≥ 1, got 'fish'"),
-        ("frames_per_batch=100", "frames_per_batch = 100 must be a multiple of num_envs = 64"),
+        ("frames_per_batch=100", "frames_per_batch = 100 must be a multiple of n_envs = 64"),
         ("colour=1", "unknown key(s) ['colour']"),
         ("env_kwargs.frameskip=4", "unexpected keyword argument 'frameskip'"),
         ("normalize_observations=1", "normalize_observations must be true or false, got 1"),
         ("normalize_advantage=maybe", "normalize_advantage must be true or false, got 'maybe'"),
         ("normalize_reward=0.5", "normalize_reward must be true or false, got 0.5"),
-        ("normalize_window=0", "normalize_window must be a whole number ≥ 1, got 0"),
         ("drop_inputs=age", "drop_inputs must be a list of observation entry names, got 'age'"),
         ("drop_inputs=['speed']", "drop_inputs must name distinct entries of ['cross_track_error'"),
         ("drop_inputs=['age', 'age']", "(repeated)"),
-        ("normalize_window=1000", "normalize_window = 1000 needs normalize_observations: true"),
         ("threads=0", "threads must be a whole number ≥ 1, got 0"),
         ("distribution=beta", "distribution must be one of ['tanh_normal', 'normal'], got 'beta'"),
-        ("lr_schedule=cosine", "lr_schedule must be one of ['constant', 'linear'], got 'cosine'"),
+        ("learning_rate=cosine", "learning_rate must be a number or 'lin_<number>', got 'cosine'"),
+        ("learning_rate=0", "learning_rate must be > 0, got 0"),
+        ("lr=1e-3", "the key 'lr' is now 'learning_rate'"),
+        ("num_envs=8", "the key 'num_envs' is now 'n_envs'"),
+        ("lmbda=0.9", "the key 'lmbda' is now 'gae_lambda'"),
+        ("clip_epsilon=0.1", "the key 'clip_epsilon' is now 'clip_range'"),
+        ("entropy_coef=0.0", "the key 'entropy_coef' is now 'ent_coef'"),
+        ("epochs=2", "the key 'epochs' is now 'n_epochs'"),
+        (
+            "lr_schedule=linear",
+            "the key 'lr_schedule' is now 'learning_rate' (a linear schedule is learning_rate: lin_",
+        ),
         ("target_kl=-0.01", "target_kl must be > 0, got -0.01"),
         ("initial_scale=0", "initial_scale must be > 0, got 0"),
         ("scale=fixed", "scale must be one of ['state_dependent', 'state_independent'], got 'fixed'"),
@@ -185,23 +204,6 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
             "initial_state_curriculum.until must lie in (0, 1], got 0",
         ),
         ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
-        ("train_reward_switch={'after': 0.5}", "train_reward_switch must be null or a mapping with the keys after"),
-        (
-            "train_reward_switch={'after': 0, 'reward': {'fine_share': 0.3}}",
-            "train_reward_switch.after must lie in (0, 1), got 0",
-        ),
-        (
-            "train_reward_switch={'after': 1.0, 'reward': {'fine_share': 0.3}}",
-            "train_reward_switch.after must lie in (0, 1), got 1.0",
-        ),
-        (
-            "train_reward_switch={'after': 0.5, 'reward': {}}",
-            "train_reward_switch.reward must be a non-empty mapping of reward fields, got {}",
-        ),
-        (
-            "train_reward_switch={'after': 0.5, 'reward': {'fine_share': 2}}",
-            "reward.fine_share must be a share in [0, 1], got 2",
-        ),
         ("train_dt=0", "train_dt must be > 0, got 0"),
         ("train_dt=1000", "train_dt = 1000.0: horizon = 400.0 s must be at least one control period dt = 1000.0 s"),
     ],
@@ -224,37 +226,12 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
         args += ["--set", item]
     assert main([*args, "--set", "train_reward.terminal_penalty=false"]) == 0
     rows = (out / "progress.csv").read_text().splitlines()[1:]
-    assert rows and all(float(row.split(",")[3]) == 0.0 for row in rows)  # mean_reward
+    assert rows and all(float(row.split(",")[5]) == 0.0 for row in rows)  # mean_reward
     summary = json.loads((out / "evaluation.json").read_text())
     assert summary["learned_return"] < 0 and summary["reference_return"] < 0
     _, config = load_torch_policy(out)
     assert "reward" not in config["env_kwargs"] and config["train_reward"]["coordination"] == 0.0
     assert trainer.training_env_kwargs(config)["reward"]["speed"] == 0.0
-
-
-def test_train_reward_switch_changes_the_learner_s_reward_once_at_its_fraction_of_the_budget(tmp_path, monkeypatch):
-    # the learner's reward is exactly 0 at first (every weight 0, no terminal penalty); from half the budget on
-    # the coordination term is back, and with 10 m of initial noise along the path it costs something
-    from marine_formation_env.torchrl import MarineFormationTorchEnv
-
-    rewards = record_calls(monkeypatch, MarineFormationTorchEnv, "set_reward")
-    out = tmp_path / "switched"
-    args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-    zero = [f"train_reward.{k}=0.0" for k in TRACKING_TERMS]
-    for item in [*TINY, *zero, "train_reward.terminal_penalty=false"]:
-        args += ["--set", item]
-    assert main([*args, "--set", "train_reward_switch={'after': 0.5, 'reward': {'coordination': 1.0}}"]) == 0
-    # 80 frames in two iterations of 40: the switch comes after the first, once
-    assert len(rewards) == 1
-    assert rewards[0].coordination == 1.0 and rewards[0].cross_track == 0.0 and not rewards[0].terminal_penalty
-    with (out / "progress.csv").open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    assert [int(row["reward_switched"]) for row in rows] == [0, 1]
-    assert float(rows[0]["mean_reward"]) == 0.0 and float(rows[1]["mean_reward"]) < 0.0
-    _, config = load_torch_policy(out)
-    assert "reward" not in config["env_kwargs"]  # the evaluation's reward stays the benchmark's
-    cfg = resolve({"train_reward_switch": {"after": 0.25, "reward": {"fine_share": 0.3}}}, seed=0)
-    assert trainer.switched_reward(cfg).fine_share == 0.3
 
 
 def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
@@ -266,7 +243,7 @@ def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
 
 def test_resolve_fills_defaults_and_keeps_the_seed():
     cfg = resolve({"scenario": "acoustic"}, seed=5)
-    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["num_envs"] == 64 and cfg["threads"] == 1
+    assert cfg["seed"] == 5 and cfg["algo"] == "mappo" and cfg["n_envs"] == 64 and cfg["threads"] == 1
     assert resolve({"threads": None}, seed=0)["threads"] is None  # torch's default
 
 
@@ -296,7 +273,7 @@ def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end
 
     def spy(out, *args):
         save(out, *args)
-        saves.append((len((out / "progress.csv").read_text().splitlines()) - 1, (out / trainer.POLICY_FILE).is_file()))
+        saves.append((len((out / "progress.csv").read_text().splitlines()) - 1, (out / networks.POLICY_FILE).is_file()))
         load_torch_policy(out)
 
     monkeypatch.setattr(trainer, "SAVE_SECONDS", 0.0)
@@ -309,21 +286,21 @@ def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end
 
 
 def test_the_linear_schedule_falls_to_zero_over_whichever_budget_runs_out_first():
-    cfg = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000, "minutes": 10}, seed=0)
+    cfg = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000, "minutes": 10}, seed=0)
     assert trainer.learning_rate(cfg, 0.0, 0) == 1e-3
     assert trainer.learning_rate(cfg, 150.0, 100) == pytest.approx(0.75e-3)  # a quarter of the 600 s used
     assert trainer.learning_rate(cfg, 60.0, 500) == pytest.approx(0.5e-3)  # half of the frames used
     assert trainer.learning_rate(cfg, 900.0, 0) == 0.0  # past the budget: floored, never negative
-    frames_only = resolve({"lr": 1e-3, "lr_schedule": "linear", "total_frames": 1000}, seed=0)
+    frames_only = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000}, seed=0)
     assert trainer.learning_rate(frames_only, 1e6, 250) == pytest.approx(0.75e-3)
-    assert trainer.learning_rate(resolve({"lr": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
+    assert trainer.learning_rate(resolve({"learning_rate": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
 
 
 def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
     out = tmp_path / "run"
     args = ["--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
     # two iterations of two minibatch updates per epoch, 3 epochs: without a stop, 6 updates each
-    for item in [*TINY, "epochs=3", "lr=1e-3", "lr_schedule=linear", "target_kl=1e-5"]:
+    for item in [*TINY, "n_epochs=3", "learning_rate=lin_1e-3", "target_kl=1e-5"]:
         args += ["--set", item]
     assert main(args) == 0
     rows = (out / "progress.csv").read_text().splitlines()
@@ -348,7 +325,7 @@ def test_train_dt_is_the_learner_s_control_period_and_the_evaluation_keeps_the_s
             args += ["--set", item]
         assert main(args) == 0
         rows = (out / "progress.csv").read_text().splitlines()[1:]
-        counts[name] = [int(float(row.split(",")[5])) for row in rows]  # episodes
+        counts[name] = [int(float(row.split(",")[3])) for row in rows]  # episodes
         _, config = load_torch_policy(out)
         assert "dt" not in config["env_kwargs"]  # the evaluation's scenario is the benchmark's
         summary = json.loads((out / "evaluation.json").read_text())
@@ -381,9 +358,9 @@ def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp
 @pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
 def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_zero(distribution):
     # with every weight of the MLP zeroed its output is 0: the Gaussian's deviation must be exactly the configured one
-    actor = trainer._policy_network(7, 2, 1, [8], False, distribution, 0.3)
+    actor = networks.policy_network(7, 2, hidden=[8], distribution=distribution, initial_scale=0.3)
     with torch.no_grad():
-        for weight in trainer._shared_trunk(actor).parameters():
+        for weight in networks.shared_trunk(actor).parameters():
             weight.zero_()
     out = actor(TensorDict({("vessel", "observation"): torch.randn(5, 1, 7)}, batch_size=[5]))
     torch.testing.assert_close(out["vessel", "scale"], torch.full((5, 1, 2), 0.3))
@@ -391,7 +368,9 @@ def test_initial_scale_is_the_exploration_deviation_where_the_network_outputs_ze
 
 
 def test_a_state_independent_scale_starts_at_initial_scale_whatever_the_observation_and_is_learned():
-    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.1, None, "state_independent")
+    actor = networks.policy_network(
+        7, 2, n_agents=3, hidden=[16], distribution="normal", initial_scale=0.1, scale="state_independent"
+    )
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     with torch.no_grad():
         scale = actor(obs)["vessel", "scale"]
@@ -404,10 +383,10 @@ def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_i
     # the same seed builds the same hidden layers; only the output layer differs: loc = gain · (W h), W h = loc₀ − b₀
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     torch.manual_seed(5)
-    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3)
+    plain = networks.policy_network(7, 2, **SMALL)
     torch.manual_seed(5)
-    small = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01)
-    *_, bias = trainer._shared_trunk(plain).parameters()
+    small = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01)
+    *_, bias = networks.shared_trunk(plain).parameters()
     with torch.no_grad():
         loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
     torch.testing.assert_close(loc_small, 0.01 * (loc_plain - bias[:2]))
@@ -420,120 +399,18 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     k = torch.tensor([0.2, 0.05])
     torch.manual_seed(5)
-    plain = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent")
+    plain = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01, scale="state_independent")
     torch.manual_seed(5)
-    scaled = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, 0.01, "state_independent", [0.2, 0.05])
+    scaled = networks.policy_network(
+        7, 2, **SMALL, action_head_gain=0.01, scale="state_independent", action_scale=[0.2, 0.05]
+    )
     with torch.no_grad():
         a, b = plain(obs.clone()), scaled(obs.clone())
     torch.testing.assert_close(b["vessel", "loc"], k * a["vessel", "loc"])
     torch.testing.assert_close(b["vessel", "scale"], torch.tensor([0.3 * 0.2, 0.3 * 0.05]).expand(64, 3, 2))
     assert [n for n, _ in scaled.named_parameters()] == [n for n, _ in plain.named_parameters()]
     with pytest.raises(ValueError, match="needs distribution 'normal'"):
-        trainer._policy_network(7, 2, 3, [16], False, "tanh_normal", 0.3, None, "state_dependent", 0.5)
-
-
-@pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
-def test_the_temporal_smoothness_term_pulls_the_deterministic_actions_of_consecutive_observations_together(
-    distribution,
-):
-    # the term is the mean |Δμ| between paired observations: gradient steps on it alone (Adam, 0.01) must shrink
-    # it on the pairs it trains on, whatever the squashing; the loc's path is what moves, not the deviation's
-    torch.manual_seed(0)
-    actor = trainer._policy_network(7, 2, 3, [16], False, distribution, 0.3, None, "state_independent")
-    cfg = resolve({"distribution": distribution, "temporal_smoothness": 1.0, "minibatch_size": 64}, seed=0)
-    obs = 3.0 * torch.randn(4, 32, 3, 7)  # (formations, time, vessels, entries)
-    data = TensorDict(
-        {("vessel", "observation"): obs, ("next", "vessel", "observation"): obs + torch.randn(4, 32, 3, 7)},
-        batch_size=[4, 32],
-    )
-    optim = torch.optim.Adam(actor.parameters(), lr=1e-2)
-
-    def scale_parameters():
-        return [p for name, p in actor.named_parameters() if "scale" in name]
-
-    scale = [p.detach().clone() for p in scale_parameters()]
-    term = trainer._smoothness_term(actor, data, cfg, 0)
-    for _ in range(40):  # 20 passes over the 128 pairs, minimizing the term alone
-        optim.zero_grad()
-        term().backward()
-        optim.step()
-    first, last = float(term.distances[0]), float(term.distances[-1])
-    assert 0.0 < last < 0.25 * first, (first, last)
-    assert scale and all(torch.equal(p, q) for p, q in zip(scale, scale_parameters(), strict=True))
-
-
-def test_the_smoothness_term_joins_each_ppo_step_instead_of_taking_steps_of_its_own():
-    # a stand-in PPO loss (a quadratic in one weight) and a term on the same weight: 2 epochs × 4 minibatches
-    # are 8 optimizer steps with the term or without it, and the term is evaluated once in each
-    from training.smoothness import SmoothnessTerm
-
-    weight = torch.nn.Parameter(torch.ones(1, 2))
-    zero = torch.zeros(())
-
-    def ppo_loss(_batch):
-        return TensorDict({"loss_objective": (weight**2).sum(), "loss_critic": zero, "loss_entropy": zero}, [])
-
-    class Buffer:
-        def sample(self):
-            return None
-
-    cfg = {"epochs": 2, "frames_per_batch": 64, "minibatch_size": 16, "target_kl": None, "max_grad_norm": 1.0}
-    ppo_loss.parameters = lambda: [weight]  # type: ignore[attr-defined]
-
-    def optimizer_steps(term):
-        optim = torch.optim.SGD([weight], lr=0.01)
-        counted = []
-        step = optim.step
-        optim.step = lambda: counted.append(step())  # type: ignore[method-assign]
-        _, updates = trainer._ppo_epochs(ppo_loss, optim, Buffer(), cfg, term)
-        return updates, len(counted)
-
-    obs = torch.randn(40, 2)
-    term = SmoothnessTerm(lambda o: o @ weight.T, obs, obs + 1.0, 0.5, 16, np.random.default_rng(0))
-    steps = {"plain": optimizer_steps(None), "term": optimizer_steps(term)}
-    assert len(term.distances) == 8
-    assert steps["plain"] == steps["term"] == (8, 8)
-
-
-def test_temporal_smoothness_changes_the_trained_policy_and_is_logged_only_when_on(tmp_path):
-    # the term is part of the PPO loss: the saved policy of a run with it differs from the same seed's run
-    # without it, which the same seed reproduces exactly (one machine, one build)
-    runs = {}
-    for name, weight in (("off", 0.0), ("again", 0.0), ("on", 5.0)):
-        out = tmp_path / name
-        args = ["--seed", "2", "--out", str(out), "--no-progress", "--set", "env_kwargs.action_level=speed"]
-        for item in [*TINY, "distribution=normal", f"temporal_smoothness={weight}"]:
-            args += ["--set", item]
-        assert main(args) == 0
-        column = [row.split(",")[10] for row in (out / "progress.csv").read_text().splitlines()[1:]]
-        policy, _ = load_torch_policy(out)
-        runs[name] = (column, [p.detach().clone() for p in policy.actor.parameters()])
-    assert runs["off"][0] == ["", ""] and all(float(x) > 0 for x in runs["on"][0])
-    assert all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["again"][1], strict=True))
-    assert not all(torch.equal(p, q) for p, q in zip(runs["off"][1], runs["on"][1], strict=True))
-    with pytest.raises(trainer.TrainConfigError, match="temporal_smoothness"):
-        resolve({"temporal_smoothness": -1.0}, seed=0)
-
-
-@pytest.mark.parametrize(("pairs", "expected"), [(None, 64), (10, 10)])
-def test_the_smoothness_term_draws_temporal_smoothness_pairs_formation_steps_per_minibatch_step(pairs, expected):
-    actor = trainer._policy_network(7, 2, 3, [16], False, "normal", 0.3, None, "state_independent")
-    cfg = resolve({"temporal_smoothness": 1.0, "minibatch_size": 64, "temporal_smoothness_pairs": pairs}, seed=0)
-    obs = torch.randn(4, 32, 3, 7)  # 128 formation-steps of 3 vessels
-    data = TensorDict({("vessel", "observation"): obs, ("next", "vessel", "observation"): obs}, batch_size=[4, 32])
-    term = trainer._smoothness_term(actor, data, cfg, 0)
-    seen = []
-    net = term.mean
-    term.mean = lambda o: (seen.append(tuple(o.shape)), net(o))[1]
-    term()
-    assert seen == [(expected, 3, 7)] * 2  # the next observations and these, each a (pairs, vessels, entries) batch
-
-
-@pytest.mark.parametrize("pairs", [0, 2.5, "64", -3])
-def test_a_bad_temporal_smoothness_pairs_is_refused_by_name(pairs):
-    message = f"temporal_smoothness_pairs must be a whole number ≥ 1, got {pairs!r}"
-    with pytest.raises(trainer.TrainConfigError, match=message):
-        resolve({"temporal_smoothness_pairs": pairs}, seed=0)
+        networks.policy_network(7, 2, **{**SMALL, "distribution": "tanh_normal"}, action_scale=0.5)
 
 
 def test_an_unreadable_policy_file_is_named(tmp_path):
@@ -545,7 +422,7 @@ def test_an_unreadable_policy_file_is_named(tmp_path):
 @pytest.mark.parametrize("path", sorted(Path(__file__).parents[1].glob("training/configs/torchrl/*.yaml")), ids=str)
 def test_shipped_torchrl_configs_resolve(path):
     cfg = resolve(load_config(path), seed=0)
-    assert cfg["frames_per_batch"] % cfg["num_envs"] == 0
+    assert cfg["frames_per_batch"] % cfg["n_envs"] == 0
     make_config(cfg["scenario"], **cfg["env_kwargs"])  # the scenario and every override exist
 
 
@@ -570,36 +447,6 @@ def test_running_norm_statistics_are_numpy_s_mean_and_variance_of_everything_it_
     expected = np.clip((every[2:7] - mean) / np.sqrt(var + 1e-8), -10, 10)
     np.testing.assert_allclose(norm(x).numpy(), expected, rtol=1e-4, atol=1e-4)
     assert norm(torch.full((1, 4), 1e6)).max() == 10.0  # clipped
-
-
-@pytest.mark.parametrize("window", [1, 150, 400, 2000, 10**9])
-def test_a_running_norm_with_a_window_is_the_weighted_mean_and_variance_of_the_rows_it_remembers(window):
-    """Truth: numpy's weighted mean and (population) variance of every row seen, each row's weight being the
-    product of the factors by which the docstring's rule shrank the statistics after it: before a batch of b rows,
-    what is remembered (total weight c) counts as min(c, max(window − b, 0)). The prior is the two points ±1 of
-    weight 5e-5 each, as above. A window of 1 keeps only the last batch; 10⁹ never forgets (the plain norm)."""
-    rng = np.random.default_rng(2)
-    norm = running_norm(3, window)
-    rows = [np.ones((1, 3)), -np.ones((1, 3))]
-    weights = [5e-5, 5e-5]
-    for size, shift in [(40, 0.0), (100, 50.0), (7, -3.0), (120, 9.0), (60, 2.0)]:
-        batch = (rng.normal(shift, [1.0, 4.0, 0.2], (size, 3)) + np.array([0.0, 10.0, -1.0])).astype(np.float32)
-        remembered = sum(weights)
-        kept = min(remembered, max(window - size, 0)) / remembered
-        weights = [w * kept for w in weights] + [1.0] * size
-        rows.append(batch)
-        norm.update(torch.from_numpy(batch.reshape(size, 1, 3)))
-    every = np.concatenate(rows).astype(np.float64)
-    mean = np.average(every, axis=0, weights=weights)
-    var = np.average((every - mean) ** 2, axis=0, weights=weights)
-    np.testing.assert_allclose(norm.mean.numpy(), mean, rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(norm.var.numpy(), var, rtol=1e-4)
-    assert float(norm.count) == pytest.approx(sum(weights), rel=1e-9)
-    if window == 1:  # only the last batch is left
-        np.testing.assert_allclose(norm.mean.numpy(), rows[-1].mean(0), rtol=1e-5, atol=1e-5)
-    # the prior and the first batch: 40 of 327 rows (12 %) when nothing is forgotten
-    first = sum(weights[:42]) / sum(weights)
-    assert first < 0.04 if window <= 150 else first == pytest.approx(40.0001 / 327.0001)
 
 
 def test_episode_returns_are_the_sums_of_each_vessel_s_rewards_between_done_flags():
@@ -677,24 +524,6 @@ def test_a_normalized_run_saves_the_statistics_and_reloads_a_policy_that_acts_li
     evaluate(["--policy", str(out), "--episodes", "2", "--seed", "10000", "--json", str(report), "--quiet"])
     mean = json.loads(report.read_text())["policies"][str(out)]["summary"]["return"]["mean"]
     assert mean == pytest.approx(json.loads((out / "evaluation.json").read_text())["learned_return"], rel=1e-9)
-
-
-def test_normalize_window_reaches_the_actor_s_and_the_critic_s_statistics(tmp_path, monkeypatch):
-    """Two batches of 40 formation-steps of 3 vessels, 120 rows each: with a window of 150 the first batch is
-    remembered as 30 rows when the second arrives, so both norms count 150 rows (240 without the window)."""
-    built = {}
-    make_critic = trainer._critic_network
-
-    def keep(*args, **kwargs):
-        built["critic"] = make_critic(*args, **kwargs)
-        return built["critic"]
-
-    monkeypatch.setattr(trainer, "_critic_network", keep)
-    windowed = ("eval_episodes=1", "normalize_observations=true", "normalize_window=150")
-    policy, config = _train_tiny(tmp_path / "run", *windowed)
-    assert config["normalize_window"] == 150
-    assert float(policy.trunk[0].count) == pytest.approx(150, abs=1e-3)
-    assert float(built["critic"].module[0].count) == pytest.approx(150, abs=1e-3)
 
 
 def test_drop_inputs_and_predicted_inputs_are_refused_together(tmp_path, capsys):

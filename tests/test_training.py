@@ -35,6 +35,7 @@ from stable_baselines3.common.vec_env.util import check_for_nested_spaces, obs_s
 
 import marine_formation_env
 from baselines.reference import ReferencePolicy
+from baselines.seeds import DEVELOPMENT_SEED, EVALUATION_SEED
 from training import train as train_module
 from training.config import (
     TrainConfigError,
@@ -53,7 +54,7 @@ REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / "training" / "configs").glob("*.yaml"))
 SPEED_CONFIG = REPO / "training" / "configs" / "paper_speed_ppo.yaml"
 ACTION_DIM = {"force": 2, "guidance": 2, "speed": 1}
-EVAL_SEED = 1_000_000  # training.callbacks: evaluation episodes use seeds 1_000_000 + k
+EVAL_SEED = DEVELOPMENT_SEED  # training.callbacks: evaluations during training use the development seeds
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -463,11 +464,12 @@ def smoke_run(tmp_path_factory):
 
 
 def test_smoke_run_writes_the_run_folder(smoke_run):
-    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "evaluations.csv"):
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "evaluations.csv", "progress.csv", "evaluation.json"):
         assert (smoke_run / name).is_file(), name
     stored = yaml.safe_load((smoke_run / "config.yaml").read_text())
-    assert list(stored) == [ENV_ID]
-    cfg = stored[ENV_ID]
+    assert list(stored)[:3] == ["trainer", "env_id", "seed"]
+    assert stored["trainer"] == "sb3" and stored["env_id"] == ENV_ID
+    cfg = {k: v for k, v in stored.items() if k not in ("trainer", "env_id")}
     assert cfg["seed"] == 0
     assert cfg["n_timesteps"] == 600 and cfg["n_envs"] == 2 and cfg["n_steps"] == 64
     assert cfg["env_kwargs"]["horizon"] == 20.0 and cfg["env_kwargs"]["action_level"] == "speed"
@@ -491,9 +493,22 @@ def test_smoke_run_logs_its_learning_curve(smoke_run):
     assert [int(r["vessel_steps"]) for r in rows] == [384, 768]
     # episodes of 20 s / 0.5 s = 40 steps end at steps 40 (rollout 1: 6 of them), 80 and 120 (rollout 2: 12)
     assert [int(r["episodes"]) for r in rows] == [6, 12]
-    returns = [float(r["episode_return"]) for r in rows]
+    returns = [float(r["episode_return_mean"]) for r in rows]
     assert all(-40.0 * 10.0 < value < 0.0 for value in returns)  # every per-step cost lies in (0, 10]
-    assert float(rows[0]["seconds"]) < float(rows[1]["seconds"])
+    assert float(rows[0]["wall_time_s"]) < float(rows[1]["wall_time_s"])
+    assert list(rows[0]) == ["vessel_steps", "wall_time_s", "episode_return_mean", "episodes"]
+
+
+def test_smoke_run_reports_its_final_policy_on_the_evaluation_seeds(smoke_run):
+    summary = json.loads((smoke_run / "evaluation.json").read_text())
+    assert summary["seeds"] == [EVALUATION_SEED]  # eval_episodes=1
+    assert summary["vessel_steps"] == 768 and summary["wall_time_s"] > 0
+    env = marine_formation_env.parallel_env(
+        "paper", action_level="speed", init_noise={"x": 40.0, "y": 20.0, "psi": 0.3, "u": 1.0}, horizon=20.0
+    )
+    assert summary["reference_returns"][0] == pytest.approx(manual_return(env, ReferencePolicy(env), EVALUATION_SEED))
+    policy, _ = load_learned_policy(smoke_run)
+    assert summary["learned_returns"][0] == pytest.approx(manual_return(env, policy, EVALUATION_SEED), rel=1e-9)
 
 
 def test_smoke_run_evaluations_against_reference(smoke_run):
@@ -591,8 +606,8 @@ def test_resume_continues_from_last_checkpoint(smoke_run, tmp_path, capsys):
     after = PPO.load(run / "model.zip", device="cpu").num_timesteps
     assert after >= 1200 and after > before
     assert max(int(p.stem.split("_")[1]) for p in (run / "checkpoints").glob("model_*_steps.zip")) > last
-    cfg = yaml.safe_load((run / "config.yaml").read_text())[ENV_ID]
-    assert cfg["seed"] == 0 and cfg["n_timesteps"] == 1200
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    assert cfg["trainer"] == "sb3" and cfg["seed"] == 0 and cfg["n_timesteps"] == 1200
     assert cfg["env_kwargs"]["horizon"] == 20.0  # the stored run config is kept
 
 
@@ -644,7 +659,7 @@ def test_sb3_training_follows_the_curriculum_over_its_budget(tmp_path, monkeypat
     # learn() resets (0.2), before the first rollout (0 used: 0.2), before the second (half used: 0.2 + 0.8 * 0.5)
     assert spreads == pytest.approx([0.2, 0.2, 0.6])
     recorded = yaml.safe_load((tmp_path / "run" / "config.yaml").read_text())
-    assert recorded[marine_formation_env.ENV_ID]["initial_state_curriculum"] == {"start": 0.2, "until": 1.0}
+    assert recorded["initial_state_curriculum"] == {"start": 0.2, "until": 1.0}
 
 
 @pytest.mark.parametrize(
@@ -694,7 +709,14 @@ def test_training_with_minutes_puts_the_learning_rate_on_the_budget_once(tmp_pat
     assert isinstance(model.lr_schedule, BudgetSchedule) and model.lr_schedule.seconds == 600.0
     # one rollout of 2 x 3 x 64 = 384 vessel-steps, in far less than 10 minutes: the steps ran out first,
     # so the update ran at SB3's own linear rate at progress 0 (all steps used)
-    assert model.lr_schedule(0.0) == 0.0 and model.lr_schedule(1.0) == pytest.approx(1e-3, rel=1e-3)
+    # (the clock keeps running after training, through the closing evaluation: bound it on both sides)
+    schedule = model.lr_schedule
+    before = time.perf_counter()
+    rate = schedule(1.0)
+    after = time.perf_counter()
+    assert schedule(0.0) == 0.0
+    assert 1e-3 * (1 - (after - schedule.start) / 600.0) <= rate <= 1e-3 * (1 - (before - schedule.start) / 600.0)
+    assert after - schedule.start < 60.0  # the run itself took far less than its 10 minutes
     again = LearningRateBudget(60.0)
     again.model = model
     again._on_training_start()  # a resumed run: re-wrapped around the original schedule, not nested

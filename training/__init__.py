@@ -1,5 +1,6 @@
-"""Training scripts for marine_formation_env (Stable-Baselines3, parameter sharing).
+"""Training for marine_formation_env: three trainers of one shared policy, and their run folders.
 
-The training pipeline (``python -m training.train``) is tracked in issue 3; this
-package holds its configs and entry points.
+``python -m training.train`` (Stable-Baselines3), ``python -m training.torchrl_ppo`` (TorchRL MAPPO/IPPO) and
+``python -m training.rllib_ppo`` (RLlib PPO) read one config vocabulary (``training/configs/``) and write one
+run-folder contract (``training.run_folder``).
 """

@@ -1,13 +1,12 @@
 """SB3 callbacks: evaluation against the reference, atomic checkpoints, a wall-clock budget, Ctrl-C.
 
-Everything they write goes through :mod:`training.run_folder` (temporary file,
+Everything they write goes through ``training.run_folder`` (temporary file,
 fsync, rename), so a run killed at any instant leaves readable files.
 """
 
 from __future__ import annotations
 
 import csv
-import io
 import json
 import pickle
 import sys
@@ -21,14 +20,13 @@ from stable_baselines3.common.callbacks import BaseCallback
 from baselines.engine import episode_reports
 from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
+from baselines.seeds import development_seeds
 from marine_formation_env.env import parallel_env
 from training import run_folder
 from training.config import budget_fraction, curriculum_spread
 from training.learned import ModelPolicy, load_learned_policy
 
 __all__ = [
-    "EVAL_SEED",
-    "PROGRESS_COLUMNS",
     "AtomicCheckpointCallback",
     "InitialStateCurriculum",
     "ProgressLog",
@@ -38,20 +36,20 @@ __all__ = [
     "evaluate_policy_episodes",
 ]
 
-#: Evaluation episodes use seeds EVAL_SEED + k, disjoint from the training seeds.
-EVAL_SEED = 1_000_000
-
 LOGGED = ("return", "final_coordination_spread", "rms_cross_track", "success")
 
 
-def evaluate_policy_episodes(env: Any, policy: Any, episodes: int, seed: int = EVAL_SEED) -> list[dict[str, Any]]:
-    """Per-episode metrics of ``policy`` on seeds ``seed, seed + 1, …``, run as one batch (:mod:`baselines.engine`)."""
-    metrics, _ = episode_reports(policy, env.config, [seed + k for k in range(episodes)], backend=env.core.backend)
+def evaluate_policy_episodes(env: Any, policy: Any, seeds: list[int]) -> list[dict[str, Any]]:
+    """Per-episode metrics of ``policy`` on ``seeds``, run as one batch (``baselines.engine``)."""
+    metrics, _ = episode_reports(policy, env.config, list(seeds), backend=env.core.backend)
     return metrics
 
 
 class ReferenceEvalCallback(BaseCallback):
     """Every ``eval_freq`` vessel-steps, run the learned policy and the reference on the same seeds.
+
+    The seeds are ``baselines.seeds.development_seeds(episodes)``: this evaluation selects the best
+    model, so it never runs on the evaluation seeds the run folder's ``evaluation.json`` reports.
 
     Logs ``eval/<metric>_learned``, ``eval/<metric>_reference`` and
     ``eval/return_ratio`` (reference return / learned return: 1 means equal,
@@ -60,10 +58,10 @@ class ReferenceEvalCallback(BaseCallback):
     and keeps the best model (highest mean learned return) as
     ``best_model.zip`` + ``best_vecnormalize.pkl`` + ``best_model.json`` (its
     evaluation row and ``eval_episodes``), replaced together
-    (:func:`training.run_folder.write_together`) *before* the row is appended,
+    (``training.run_folder.write_together``) *before* the row is appended,
     so the recorded best is never below a row of ``evaluations.csv``.
 
-    A resumed run calls :meth:`restore_best` first, so the best score of the
+    A resumed run calls ``restore_best`` first, so the best score of the
     earlier part of the run is kept (a later evaluation replaces
     ``best_model.zip`` only if it beats it).
     """
@@ -81,8 +79,9 @@ class ReferenceEvalCallback(BaseCallback):
         self.env = parallel_env(scenario, **env_kwargs)
         self.eval_freq = int(eval_freq)
         self.episodes = int(episodes)
+        self.seeds = development_seeds(self.episodes)
         self.out_dir = Path(out_dir)
-        self.reference = summarize(evaluate_policy_episodes(self.env, ReferencePolicy(self.env), self.episodes))
+        self.reference = summarize(evaluate_policy_episodes(self.env, ReferencePolicy(self.env), self.seeds))
         self.best = -np.inf
         self._last = 0
 
@@ -129,7 +128,7 @@ class ReferenceEvalCallback(BaseCallback):
             )
             self.best = -np.inf
             return self.best
-        learned = summarize(evaluate_policy_episodes(self.env, policy, self.episodes))
+        learned = summarize(evaluate_policy_episodes(self.env, policy, self.seeds))
         row = self._row(learned, int(record["timesteps"]), float(record.get("wall_time", time.time())))
         run_folder.write_bytes(
             self.out_dir / "best_model.json", json.dumps({**row, "eval_episodes": self.episodes}).encode()
@@ -140,7 +139,7 @@ class ReferenceEvalCallback(BaseCallback):
     def evaluate(self) -> dict[str, Any]:
         """Run the evaluation now; return the learned policy's summary."""
         normalizer = self.model.get_vec_normalize_env()
-        learned = summarize(evaluate_policy_episodes(self.env, ModelPolicy(self.model, normalizer), self.episodes))
+        learned = summarize(evaluate_policy_episodes(self.env, ModelPolicy(self.model, normalizer), self.seeds))
         row = self._row(learned, self.num_timesteps, time.time())
         for key, value in row.items():
             if key not in ("timesteps", "wall_time"):
@@ -171,7 +170,7 @@ class AtomicCheckpointCallback(BaseCallback):
     Replaces SB3's ``CheckpointCallback`` with the same file names
     (``checkpoints/model_<N>_steps.zip``, ``checkpoints/model_vecnormalize_<N>_steps.pkl``),
     but each file is written atomically and the statistics before the model
-    (:func:`training.run_folder.save_checkpoint`).
+    (``training.run_folder.save_checkpoint``).
     """
 
     def __init__(self, out_dir: Path, every: int, verbose: int = 0) -> None:
@@ -196,7 +195,7 @@ class AtomicCheckpointCallback(BaseCallback):
 
 
 class StopRequest(BaseCallback):
-    """Stop training at the next step once :attr:`requested` is set (e.g. by a SIGINT handler)."""
+    """Stop training at the next step once ``requested`` is set (e.g. by a SIGINT handler)."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -206,18 +205,15 @@ class StopRequest(BaseCallback):
         return not self.requested
 
 
-#: Columns of a run folder's ``progress.csv`` (SB3 runs; TorchRL runs have these and more).
-PROGRESS_COLUMNS = ("vessel_steps", "seconds", "episode_return", "episodes")
-
-
 class ProgressLog(BaseCallback):
     """The learning curve of a run: ``out/progress.csv``, one row per rollout.
 
-    ``episode_return`` is the mean return (per vessel, the env's raw reward,
+    The columns are ``training.run_folder.PROGRESS_COLUMNS``, those of every trainer.
+    ``episode_return_mean`` is the mean return (per vessel, the env's raw reward,
     as the evaluation's ``return``) of the training episodes that ended during
     the rollout, from the ``VecMonitor`` under the normalization (the
     stochastic policy's, on the training distribution of initial states);
-    empty when none ended. ``seconds`` counts from the start of this
+    empty when none ended. ``wall_time_s`` counts from the start of this
     ``learn`` call (plus the last row's on a resumed run). The file is
     rewritten atomically at most every ``every`` seconds and at the end.
     """
@@ -236,7 +232,7 @@ class ProgressLog(BaseCallback):
         if self.path.is_file():
             with self.path.open(newline="") as handle:
                 self.rows = [row for row in csv.DictReader(handle) if int(row["vessel_steps"]) <= steps]
-            self.offset = float(self.rows[-1]["seconds"]) if self.rows else 0.0
+            self.offset = float(self.rows[-1]["wall_time_s"]) if self.rows else 0.0
 
     def _on_training_start(self) -> None:
         self.start = self.written = time.perf_counter()
@@ -253,8 +249,8 @@ class ProgressLog(BaseCallback):
         self.rows.append(
             {
                 "vessel_steps": int(self.num_timesteps),
-                "seconds": round(self.offset + now - self.start, 3),
-                "episode_return": float(np.mean(fresh)) if fresh else "",
+                "wall_time_s": round(self.offset + now - self.start, 3),
+                "episode_return_mean": float(np.mean(fresh)) if fresh else "",
                 "episodes": len(fresh),
             }
         )
@@ -266,11 +262,7 @@ class ProgressLog(BaseCallback):
         self._write()
 
     def _write(self) -> None:
-        text = io.StringIO()
-        writer = csv.DictWriter(text, fieldnames=list(PROGRESS_COLUMNS))
-        writer.writeheader()
-        writer.writerows(self.rows)
-        run_folder.write_bytes(self.path, text.getvalue().encode())
+        run_folder.write_progress(self.path, self.rows)
 
 
 class WallClockBudget(BaseCallback):
@@ -293,8 +285,8 @@ class BudgetSchedule:
 
     ``schedule(1 − used)`` with ``used`` the fraction of the budget spent, whichever of SB3's steps (``1 −
     progress_remaining``) and ``seconds`` of wall time since ``start`` runs out first
-    (:func:`training.config.budget_fraction`), floored at 0: a ``lin_<x>`` learning rate then reaches 0 at the
-    end of the minutes the learning benchmarks give, as the TorchRL trainer's ``lr_schedule: linear`` does,
+    (``training.config.budget_fraction``), floored at 0: a ``lin_<x>`` learning rate then reaches 0 at the
+    end of the minutes the learning benchmarks give, as the TorchRL trainer's ``lin_<rate>`` does,
     instead of following an ``n_timesteps`` far beyond what the minutes reach. A constant schedule stays constant.
     """
 
@@ -309,7 +301,7 @@ class BudgetSchedule:
 
 
 class LearningRateBudget(BaseCallback):
-    """At the start of training, make the model's learning-rate schedule a :class:`BudgetSchedule` of ``seconds``."""
+    """At the start of training, make the model's learning-rate schedule a ``BudgetSchedule`` of ``seconds``."""
 
     def __init__(self, seconds: float) -> None:
         super().__init__()
@@ -328,7 +320,7 @@ class LearningRateBudget(BaseCallback):
 class InitialStateCurriculum(BaseCallback):
     """A curriculum over the initial state (``initial_state_curriculum``): before each rollout the training env's
     later (auto)resets start ``start + (1 − start) · min(1, used / until)`` of the way from the formation on its
-    lanes to the scenario's initial state (:func:`training.config.curriculum_spread`).
+    lanes to the scenario's initial state (``training.config.curriculum_spread``).
 
     ``used`` is the fraction of the budget spent, whichever of ``total_steps`` vessel-steps and ``seconds`` of
     wall time (counted from this ``learn`` call) runs out first, as the TorchRL trainer counts it. The innermost

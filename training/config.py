@@ -26,28 +26,25 @@ topology_seed: 2}``). ``env_kwargs`` itself (the scenario of evaluations and
 exports) gets the largest team's ``observation_slots`` unless it sets them,
 every team inherits them, and a team with another observation length or
 level is refused; the policy must read slots (``features_extractor_class:
-slots``, :mod:`training.slot_policy`, with ``normalize: {norm_obs: false}``).
+slots``, ``training.slot_policy``, with ``normalize: {norm_obs: false}``).
 
 ``train_reward`` (a mapping of reward fields, default empty) shapes the reward
-the learner trains on and nothing else, as in :mod:`training.torchrl_ppo`:
+the learner trains on and nothing else, as in ``training.torchrl_ppo``:
 ``train_reward: {sigma_cross_track: 5.0, sigma_coordination: 5.0}`` trains
 every team on 5 m scales, while evaluations, checkpoints' headers and exports
-keep ``env_kwargs``'s reward, the benchmark's. ``action_change_penalty`` (a
-weight w ≥ 0 in 1/s, default 0: none) charges the learner ``dt·w·mean|a_k −
-a_{k−1}|`` per vessel and period for changing its action
-(:class:`training.vec_env.ActionChangePenalty`), learner-side shaping as well.
-``algo: ppo`` is :class:`training.smoothness.SmoothPPO`, SB3's PPO with one more
+keep ``env_kwargs``'s reward, the benchmark's.
+``algo: ppo`` is ``training.smoothness.SmoothPPO``, SB3's PPO with one more
 hyperparameter, ``temporal_smoothness`` (λ ≥ 0, default 0: PPO itself), a
 regularizer on the change of the policy's mean action between consecutive
 observations that leaves the reward alone (CAPS' temporal term).
 
 Hyperparameter names are checked against the algorithm's constructor, env
-overrides against :class:`~marine_formation_env.scenarios.ScenarioConfig`;
-unknown keys raise :class:`TrainConfigError` naming them. ``learning_rate``
+overrides against ``ScenarioConfig``;
+unknown keys raise ``TrainConfigError`` naming them. ``learning_rate``
 may be ``lin_<value>`` (linear decay to 0, as in the zoo; with a wall-clock budget, over whichever of
-it and ``n_timesteps`` runs out first: :class:`training.callbacks.BudgetSchedule`); ``activation_fn`` is
+it and ``n_timesteps`` runs out first: ``training.callbacks.BudgetSchedule``); ``activation_fn`` is
 a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``), and so is
-``features_extractor_class`` (``slots``: :class:`training.slot_policy.SlotFeatures`).
+``features_extractor_class`` (``slots``: ``training.slot_policy.SlotFeatures``).
 
 Values SB3 or torch would choke on (or, worse, accept and fail on much later)
 are refused here by name: ``n_steps``, ``batch_size``, ``n_epochs``,
@@ -73,16 +70,19 @@ from typing import Any
 import yaml
 
 from marine_formation_env import ENV_ID
+from marine_formation_env.cli import int_at_least, parse_overrides, report_error
 from marine_formation_env.scenarios import ConfigError, make_config
 
 __all__ = [
     "ALGOS",
+    "RENAMED_KEYS",
     "RESUMABLE_KEYS",
     "SPECIAL_KEYS",
     "TrainConfigError",
     "algo_class",
     "apply_overrides",
     "check_curriculum",
+    "check_renamed",
     "check_train_reward",
     "config_differences",
     "curriculum_spread",
@@ -108,7 +108,6 @@ SPECIAL_KEYS = {
     "teams": [],
     "train_reward": {},
     "initial_state_curriculum": None,
-    "action_change_penalty": 0.0,
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -146,6 +145,34 @@ _NOT_HYPERPARAMS = {"self", "policy", "env", "tensorboard_log", "verbose", "seed
 
 class TrainConfigError(ValueError):
     """An invalid training configuration (names the offending key or value)."""
+
+
+#: Keys the TorchRL and RLlib trainers once had, with the one name all three trainers now use (SB3's).
+RENAMED_KEYS = {
+    "num_envs": "n_envs",
+    "num_envs_per_env_runner": "n_envs",
+    "lr": "learning_rate",
+    "lr_schedule": "learning_rate",
+    "lmbda": "gae_lambda",
+    "lambda": "gae_lambda",
+    "clip_epsilon": "clip_range",
+    "clip_param": "clip_range",
+    "entropy_coef": "ent_coef",
+    "entropy_coeff": "ent_coef",
+    "epochs": "n_epochs",
+    "num_epochs": "n_epochs",
+    "grad_clip": "max_grad_norm",
+}
+
+
+def check_renamed(raw: dict[str, Any], renamed: dict[str, str] | None = None) -> None:
+    """Refuse a config that still uses an old key (``RENAMED_KEYS``, or ``renamed``), naming the new one."""
+    table = RENAMED_KEYS if renamed is None else renamed
+    for old in raw:
+        if old in table:
+            new = table[old]
+            hint = " (a linear schedule is learning_rate: lin_<rate>)" if old == "lr_schedule" else ""
+            raise TrainConfigError(f"the key {old!r} is now {new!r}{hint}; rename it in the config or --set")
 
 
 def algo_class(name: str) -> Any:
@@ -255,7 +282,7 @@ def _same_number(a: Any, b: Any) -> bool:
 def team_overrides(resolved: dict[str, Any]) -> list[dict[str, Any]]:
     """The env overrides of each team of a resolved config (no ``teams``: ``env_kwargs`` alone).
 
-    With ``teams``, each team is ``env_kwargs`` with the team's overrides on top, and :func:`validate` has
+    With ``teams``, each team is ``env_kwargs`` with the team's overrides on top, and ``validate`` has
     given ``env_kwargs`` (the scenario of evaluations and exports) the largest team's ``observation_slots``,
     which every team inherits unless it sets its own.
     """
@@ -267,7 +294,7 @@ def training_env_kwargs(cfg: dict[str, Any], env_kwargs: dict[str, Any] | None =
     """The env overrides the learner trains on: ``env_kwargs`` with ``train_reward``'s fields in its reward.
 
     ``env_kwargs`` defaults to the config's own (the scenario of evaluations); pass a team's overrides
-    (:func:`team_overrides`) to shape that team's reward. Evaluations and exports never see the shaping.
+    (``team_overrides``) to shape that team's reward. Evaluations and exports never see the shaping.
     """
     base = cfg["env_kwargs"] if env_kwargs is None else env_kwargs
     if not cfg["train_reward"]:
@@ -297,7 +324,7 @@ def check_curriculum(value: Any) -> dict[str, float] | None:
 
     The learner's env starts its formations ``start + (1 − start) · min(1, used / until)`` of the way from
     the formation on its lanes to the scenario's initial state, ``used`` being the fraction of the run's
-    budget spent (:func:`curriculum_spread`); both trainers take it.
+    budget spent (``curriculum_spread``); both trainers take it.
     """
     if value is None:
         return None
@@ -387,6 +414,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
         TrainConfigError: unknown keys (hyperparameters, env overrides, policy
             kwargs), wrong types, or env overrides the env rejects.
     """
+    check_renamed(config)
     resolved = {**copy.deepcopy(SPECIAL_KEYS), **copy.deepcopy(config)}
     cls = algo_class(resolved["algo"])
     allowed = hyperparameter_names(cls)
@@ -430,12 +458,9 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     _check_teams(resolved)
     check_train_reward(resolved)
     resolved["initial_state_curriculum"] = check_curriculum(resolved["initial_state_curriculum"])
-    penalty = resolved["action_change_penalty"]
-    if not (_is_number(penalty) and math.isfinite(penalty) and penalty >= 0):
-        raise TrainConfigError(f"action_change_penalty must be a number >= 0, got {penalty!r}")
     lr = resolved.get("learning_rate")
     if isinstance(lr, str):
-        _parse_schedule(lr)
+        parse_schedule(lr)
     norm = resolved["normalize"]
     if not isinstance(norm, (bool, dict)):
         raise TrainConfigError(f"normalize must be true/false or a mapping of VecNormalize arguments, got {norm!r}")
@@ -563,7 +588,8 @@ def _check_hyperparameters(resolved: dict[str, Any]) -> None:
         raise TrainConfigError(f"ent_coef must be a number ≥ 0 (or 'auto' for sac), got {ent!r}")
 
 
-def _parse_schedule(value: str) -> float:
+def parse_schedule(value: str) -> float:
+    """The start of a ``lin_<rate>`` learning rate (falls linearly to 0); refuses anything else by name."""
     if not value.startswith("lin_"):
         raise TrainConfigError(f"learning_rate must be a number or 'lin_<number>', got {value!r}")
     try:
@@ -582,7 +608,7 @@ def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:
     kwargs = {k: v for k, v in resolved.items() if k not in SPECIAL_KEYS}
     lr = kwargs.get("learning_rate")
     if isinstance(lr, str):
-        start = _parse_schedule(lr)
+        start = parse_schedule(lr)
         kwargs["learning_rate"] = lambda progress: progress * start
     policy_kwargs = dict(resolved["policy_kwargs"])
     if "activation_fn" in policy_kwargs:
@@ -604,10 +630,8 @@ def algo_kwargs(resolved: dict[str, Any]) -> dict[str, Any]:
 def add_run_arguments(parser: Any) -> None:
     """The options every trainer of a run folder takes: ``--config``, ``--set``, ``--seed``, ``--out``, ...
 
-    Shared by ``training.torchrl_ppo`` and ``training.rllib_ppo``; read them back with :func:`config_from_arguments`.
+    Shared by ``training.torchrl_ppo`` and ``training.rllib_ppo``; read them back with ``config_from_arguments``.
     """
-    from marine_formation_env.cli import int_at_least
-
     parser.add_argument("--config", type=Path, default=None, help="YAML file (a mapping under MarineFormation-v1)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override; dots nest")
     parser.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the run (default 0)")
@@ -617,12 +641,10 @@ def add_run_arguments(parser: Any) -> None:
 
 
 def config_from_arguments(args: Any, resolve: Any, prog: str) -> dict[str, Any]:
-    """The resolved config of :func:`add_run_arguments`' options (the file, then ``--set``, then ``resolve``).
+    """The resolved config of ``add_run_arguments``' options (the file, then ``--set``, then ``resolve``).
 
     A bad file, override or value ends the program with one line naming it (``prog: error: ...``).
     """
-    from marine_formation_env.cli import parse_overrides, report_error
-
     try:
         raw = load_config(args.config) if args.config is not None else {}
         raw = apply_overrides(dict(raw), parse_overrides(args.set, nest=False))

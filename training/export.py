@@ -1,11 +1,11 @@
 """Export a trained policy as a pretrained ``.npz`` file that runs with numpy alone.
 
-:func:`export_run` reads a run folder of ``training.train`` (SB3) or
+``export_run`` reads a run folder of ``training.train`` (SB3) or
 ``training.torchrl_ppo`` (the trainer is its ``config.yaml``'s ``trainer``
 field), copies the deterministic network's weights, observation statistics
-and action units into a :class:`~baselines.pretrained.MLPPolicy`, and writes
+and action units into a ``MLPPolicy``, and writes
 it with a header saying what it expects and what it scored
-(:mod:`baselines.pretrained` describes the format)::
+(``baselines.pretrained`` describes the format)::
 
     python -m training.export runs/paper_speed --name my_policy --folder runs/exported
     python -m baselines.evaluate --policy runs/exported/my_policy.npz --policy reference --episodes 10
@@ -29,13 +29,13 @@ from marine_formation_env.cli import ArgumentParser
 from marine_formation_env.scenarios import make_config
 from training.inputs import InputMask
 from training.learned import evaluation_summary, load_learned_policy
-from training.torchrl_ppo import load_torch_policy
+from training.torchrl_networks import load_torch_policy
 
 __all__ = ["export_run", "main"]
 
 
 def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
-    """The deterministic network of an SB3 ``training.train`` run (MlpPolicy, tanh) as an :class:`MLPPolicy`."""
+    """The deterministic network of an SB3 ``training.train`` run (MlpPolicy, tanh) as an ``MLPPolicy``."""
     policy, config = load_learned_policy(run)
     model = policy.model
     net = model.policy
@@ -132,25 +132,27 @@ def export_run(
 
     The header takes the scenario, env overrides and team size from the run's
     config; ``training`` and ``evaluation`` add what the caller knows. Without
-    an ``evaluation`` the run's ``evaluation.json`` is read, and if it has no
-    per-episode returns (an SB3 run), the trained network (the library's, not
-    the numpy copy) and the reference are run on the first ``episodes`` evaluation seeds (:mod:`baselines.seeds`)
-    of its training scenario: every header says what its policy scored.
+    an ``evaluation`` the run's ``evaluation.json`` is read, and if there is
+    none (a run stopped before its closing evaluation), the trained network
+    (the library's, not the numpy copy) and the reference are run on the first
+    ``episodes`` evaluation seeds (``baselines.seeds``) of its training
+    scenario: every header says what its policy scored.
     """
     run = Path(run)
     if not name.replace("_", "").isalnum():
         raise ValueError(f"a pretrained policy's name is letters, digits and underscores, got {name!r}")
-    pipeline = trainer_of(run_folder_of(run))
+    run_dir = run_folder_of(run)
+    pipeline = trainer_of(run_dir)
     if pipeline not in NETWORKS:
         raise ValueError(f"{run}: only runs of {sorted(NETWORKS)} can be exported, this one is of {pipeline!r}")
     policy, config = NETWORKS[pipeline](run)
     scenario, env_kwargs = config["scenario"], dict(config["env_kwargs"])
     cfg = make_config(scenario, **env_kwargs)
     measured = dict(evaluation or {})
-    summary = (run if run.is_dir() else run.parent) / "evaluation.json"
+    summary = run_dir / "evaluation.json"
     if not measured and summary.is_file():
         measured = json.loads(summary.read_text())
-    if "learned_returns" not in measured:  # an SB3 run has no closing evaluation: measure the trained network
+    if "learned_returns" not in measured:  # no closing evaluation: measure the trained network
         measured = _measure(run, episodes)
     info = PretrainedInfo(
         name=name,

@@ -2,7 +2,7 @@
 
 A vessel's observation is its own part (``OWN_SIZE`` entries) and one
 ``SLOT_SIZE``-entry slot per other vessel (``marine_formation_env.rules``).
-:func:`predicted_inputs` maps it, without learned parameters, to what
+``predicted_inputs`` maps it, without learned parameters, to what
 ``training.slot_policy.SlotFeatures`` reads:
 
 * each slot's Δθ predicted to now from the message's velocity and age,
@@ -12,13 +12,13 @@ A vessel's observation is its own part (``OWN_SIZE`` entries) and one
 * every entry divided by a fixed scale (``baselines.pretrained.OWN_SCALE``,
   ``SLOT_SCALE``: metres by 50, speeds by 5, ages by 10 s, …).
 
-:class:`PredictedInputs` is the same map as a module that keeps the
+``PredictedInputs`` is the same map as a module that keeps the
 observation's layout, for an MLP (``training.torchrl_ppo``'s ``inputs:
 predicted``); ``baselines.pretrained.predicted_inputs`` is its numpy twin, so
 an exported policy runs without torch.
 
-:class:`InputMask` zeroes chosen entries of every observation
-(:func:`dropped_mask`; ``training.torchrl_ppo``'s ``drop_inputs``), so a
+``InputMask`` zeroes chosen entries of every observation
+(``dropped_mask``; ``training.torchrl_ppo``'s ``drop_inputs``), so a
 network cannot read them; ``baselines.pretrained.MLPPolicy``'s ``input_mask``
 is its numpy twin.
 """
@@ -85,7 +85,7 @@ def predicted_inputs(
 
 
 class PredictedInputs(nn.Module):
-    """:func:`predicted_inputs` as a module ``(..., dim) → (..., dim)``: the own inputs, then the slots, flat.
+    """``predicted_inputs`` as a module ``(..., dim) → (..., dim)``: the own inputs, then the slots, flat.
 
     The scales are buffers (saved with the network, never trained).
     """

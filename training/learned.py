@@ -1,11 +1,12 @@
 """Learned policies with the same interface as the reference policy.
 
-:class:`ModelPolicy` wraps an SB3 model (and the observation normalization it
+``ModelPolicy`` wraps an SB3 model (and the observation normalization it
 was trained with) as a policy over PettingZoo observation dicts: every vessel
 acts from its own masked observation with the shared network.
-:func:`load_learned_policy` loads one from a run folder written by
+``load_sb3_run`` loads one from a run folder written by
 ``python -m training.train`` (``model.zip``, ``vecnormalize.pkl``,
-``config.yaml``).
+``config.yaml``); ``load_learned_policy`` loads a run folder of any trainer,
+by the ``trainer`` field of its ``config.yaml``.
 """
 
 from __future__ import annotations
@@ -16,10 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from baselines.engine import episode_reports
+from baselines.reference import ReferencePolicy
 from baselines.rollout import BatchPolicy
-from marine_formation_env import ENV_ID
+from baselines.runs import RunFolderError, load_run, read_config, run_folder_of
+from baselines.seeds import evaluation_seeds
+from marine_formation_env.atomic import atomic_write_text
+from marine_formation_env.env import parallel_env
+from training import run_folder
 from training.config import algo_class
 
 __all__ = [
@@ -29,8 +35,8 @@ __all__ = [
     "evaluate_run",
     "evaluation_summary",
     "load_learned_policy",
+    "load_sb3_run",
     "member_metrics",
-    "run_folder_of",
 ]
 
 
@@ -38,7 +44,7 @@ class ModelPolicy(BatchPolicy):
     """A shared SB3 policy acting for every vessel.
 
     A policy whose features extractor is the slot network
-    (:class:`training.slot_policy.SlotFeatures`, ``any_slots``) reads any
+    (``training.slot_policy.SlotFeatures``, ``any_slots``) reads any
     number of observation slots, so it acts in any team: observations of
     another length than its training team's go through the network directly
     (SB3's ``predict`` accepts only the training shape), with the same
@@ -92,58 +98,54 @@ class ModelPolicy(BatchPolicy):
         return np.clip(actions, self.model.action_space.low, self.model.action_space.high)
 
 
-def run_folder_of(path: str | Path) -> Path:
-    """The run folder of a model path (``runs/NAME/model.zip``) or of a folder (``runs/NAME``)."""
-    path = Path(path)
-    return path if path.is_dir() else path.parent
-
-
 def load_learned_policy(path: str | Path, deterministic: bool = True) -> tuple[Any, dict[str, Any]]:
-    """Load a trained policy and the resolved config of its run.
+    """Load a trained policy and the resolved config of its run (``baselines.runs.load_run``).
+
+    The kind of run is ``config.yaml``'s ``trainer`` field, and its loader the entry point of that name in
+    ``marine_formation_env.trainers``.
 
     Args:
-        path: ``runs/NAME/model.zip`` (or any checkpoint ``.zip`` in a run
-            folder) or the run folder itself; a run folder of
-            ``training.torchrl_ppo`` (``policy.pt``) gives a
-            :class:`~training.torchrl_ppo.TorchPolicy`, one of
-            ``training.rllib_ppo`` (``checkpoint/``) a
-            :class:`~training.rllib_ppo.RLlibPolicy`.
+        path: a run folder of any trainer (or a path in it), or one SB3 model file of a run folder
+            (``model.zip``, ``best_model.zip``, a checkpoint in ``checkpoints/``).
+        deterministic: act with the distribution's mode (the default; the TorchRL and RLlib policies act
+            deterministically only).
 
     Returns:
-        ``(policy, config)`` where ``config`` is the run's resolved training
-        config (``scenario`` and ``env_kwargs`` say what it was trained on).
+        ``(policy, config)`` where ``config`` is the run's ``config.yaml`` (``trainer``, ``seed``, ``scenario``
+        and ``env_kwargs`` say what it was trained on).
+
+    Raises:
+        baselines.runs.RunFolderError: no ``config.yaml``, or one without a ``trainer`` field.
+        UnreadableRunError: the policy files cannot be read.
     """
-    path = Path(path)
-    if path.is_dir() and ((path / "checkpoint" / "learner_group").is_dir() or (path / "learner_group").is_dir()):
-        from training.rllib_ppo import load_rllib_policy  # a run (or the checkpoint) of training.rllib_ppo
+    try:
+        return load_run(path, deterministic=deterministic)
+    except (RunFolderError, UnreadableRunError):
+        raise
+    except ValueError as err:
+        raise UnreadableRunError(str(err)) from None
 
-        try:
-            return load_rllib_policy(path)
-        except ValueError as err:
-            raise UnreadableRunError(str(err)) from None
-    if path.is_dir() and (path / "policy.pt").is_file():  # a run of training.torchrl_ppo
-        from training.torchrl_ppo import load_torch_policy
 
-        try:
-            return load_torch_policy(path)
-        except ValueError as err:
-            raise UnreadableRunError(str(err)) from None
-    model_path = path / "model.zip" if path.is_dir() else path
-    folder = run_folder_of(path)
+def load_sb3_run(run: Path, deterministic: bool = True) -> tuple[BatchPolicy, dict[str, Any]]:
+    """The policy of a ``training.train`` run and its config: ``run`` is the run folder (its final ``model.zip``
+    and ``vecnormalize.pkl``) or one model file of it (``best_model.zip``, a checkpoint).
+
+    The loader of the ``sb3`` entry point of ``marine_formation_env.trainers``.
+    """
+    run = Path(run)
+    folder = run_folder_of(run)
+    return _load_sb3_model(run if run.is_file() else folder / "model.zip", read_config(folder), deterministic)
+
+
+def _load_sb3_model(
+    model_path: Path, config: dict[str, Any], deterministic: bool
+) -> tuple[ModelPolicy, dict[str, Any]]:
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {str(model_path)!r}")
-    config_path = folder / "config.yaml"
-    if not config_path.is_file():
-        config_path = folder.parent / "config.yaml"  # a checkpoint in runs/NAME/checkpoints/
-    if not config_path.is_file():
-        raise FileNotFoundError(f"no config.yaml beside {str(model_path)!r}: was it written by training.train?")
     try:
-        config = yaml.safe_load(config_path.read_text())[ENV_ID]
-        algo = config["algo"]
-    except (yaml.YAMLError, KeyError, TypeError) as err:
-        raise UnreadableRunError(f"{config_path} is not a training config ({type(err).__name__}: {err})") from None
-    try:
-        model = algo_class(algo).load(model_path, device="cpu")
+        model = algo_class(config["algo"]).load(model_path, device="cpu")
+    except KeyError as err:
+        raise UnreadableRunError(f"the config of {model_path.parent} has no {err}") from None
     except UNREADABLE as err:
         raise UnreadableRunError(f"cannot load the model {str(model_path)!r}: {_reason(err)}") from None
     normalizer = None
@@ -173,28 +175,27 @@ UNREADABLE = (
 
 
 def evaluate_run(
-    out: Path, policy: Any, cfg: dict[str, Any], frames: int, vessel_steps: int, seconds: float
+    out: Path, policy: Any, cfg: dict[str, Any], *, vessel_steps: int, wall_time_s: float
 ) -> dict[str, Any]:
-    """A trained policy and the reference on the same seeds (10 000 +), written to ``out/evaluation.json``.
+    """A trained policy and the reference on the evaluation seeds, written to ``out/evaluation.json``.
 
-    The closing evaluation of ``training.torchrl_ppo`` and ``training.rllib_ppo``
-    (the engine of ``baselines.evaluate``): ``cfg`` gives ``scenario``,
-    ``env_kwargs`` and ``eval_episodes``; ``frames``, ``vessel_steps`` and
-    ``seconds`` say how much training the policy had.
+    The closing evaluation of every trainer (the engine of ``baselines.evaluate``), on
+    ``baselines.seeds.evaluation_seeds(cfg["eval_episodes"])`` of ``cfg``'s ``scenario`` and ``env_kwargs``
+    (the benchmark's reward, never ``train_reward``). The file's schema is the same for every trainer:
+    ``seeds``, ``vessel_steps`` and ``wall_time_s`` (how much training the policy had), then for ``learned``
+    and ``reference`` each ``<name>_return`` (mean), ``<name>_success`` (rate), ``<name>_returns`` (per
+    episode) and ``<name>_action_change`` (mean per step) (``evaluation_summary``).
     """
     import json
 
-    from marine_formation_env.atomic import atomic_write_text
-
-    seeds = [10_000 + k for k in range(cfg["eval_episodes"])]
+    seeds = evaluation_seeds(cfg["eval_episodes"])
     summary = {
         "seeds": seeds,
-        "frames": frames,
-        "vessel_steps": vessel_steps,
-        "seconds": seconds,
+        "vessel_steps": int(vessel_steps),
+        "wall_time_s": float(wall_time_s),
         **evaluation_summary(policy, cfg["scenario"], cfg["env_kwargs"], seeds),
     }
-    atomic_write_text(out / "evaluation.json", json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / run_folder.EVALUATION_FILE, json.dumps(summary, indent=2) + "\n")
     return summary
 
 
@@ -204,8 +205,6 @@ def member_metrics(policies: dict[str, Any], config: Any, seeds: list[int]) -> d
     Per policy: the mean ``return`` and the per-episode ``returns``, the ``success`` rate, the mean
     ``action_change`` per step and the mean ``final_spread`` (the coordination spread at the end).
     """
-    from baselines.engine import episode_reports
-
     out: dict[str, dict[str, Any]] = {}
     for name, policy in policies.items():
         metrics, _ = episode_reports(policy, config, seeds)
@@ -220,11 +219,8 @@ def member_metrics(policies: dict[str, Any], config: Any, seeds: list[int]) -> d
 
 
 def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, Any]:
-    """``policy`` and the reference on ``seeds`` of the scenario (:func:`member_metrics`), flat: the mean return
+    """``policy`` and the reference on ``seeds`` of the scenario (``member_metrics``), flat: the mean return
     and success of each, the per-episode returns and the mean action change per step."""
-    from baselines.reference import ReferencePolicy
-    from marine_formation_env.env import parallel_env
-
     env = parallel_env(scenario, **env_kwargs)
     members = member_metrics({"learned": policy, "reference": ReferencePolicy(env)}, env.config, seeds)
     return {f"{m}_{key}": members[m][key] for m in members for key in ("return", "success", "returns", "action_change")}

@@ -13,7 +13,7 @@ constraints-ecosystem.txt -e ".[rllib]"``)::
 
 ``--address`` joins a running Ray cluster (``HOST:PORT``, or ``auto`` on a
 node of it); without it a Ray instance of this process is started and stopped
-with it. Starting a cluster (:mod:`baselines.ray_cluster`)::
+with it. Starting a cluster (``baselines.ray_cluster``)::
 
     ray start --head --port=6379                 # on the head node
     ray start --address=HEAD_IP:6379             # on every other node
@@ -26,31 +26,34 @@ bad values are refused by name):
 |---|---|---|
 | ``scenario``, ``env_kwargs`` | the scenario and its overrides, as for ``parallel_env`` | ``paper``, ``{}`` |
 | ``num_env_runners`` | Ray actors that step envs (0: sample in this process) | 2 |
-| ``num_envs_per_env_runner`` | formations per env runner | 1 |
+| ``n_envs`` | formations per env runner (RLlib's ``num_envs_per_env_runner``) | 1 |
 | ``env_runner_resources`` | custom Ray resources each env runner needs (places them on nodes that have them) | ``{}`` |
 | ``train_batch_size`` | formation-steps per iteration (vessel-steps = × n) | 4000 |
-| ``minibatch_size``, ``num_epochs`` | SGD minibatch (vessel-steps), passes over each batch | 1000, 4 |
+| ``batch_size``, ``n_epochs`` | SGD minibatch [vessel-steps], passes over each batch | 1000, 4 |
 | ``iterations`` | training iterations, or null (then ``minutes`` or ``total_env_steps`` stops) | null |
 | ``total_env_steps`` | formation-steps of the run | 1.0e6 |
 | ``minutes`` | wall-clock limit (stops after the iteration that passes it), or null | null |
 | ``hidden`` | hidden layers of the policy and value networks | ``[64, 64]`` |
-| ``lr``, ``gamma``, ``lambda`` | learning rate, discount, GAE λ (RLlib's names) | 3e-4, 0.99, 0.95 |
-| ``clip_param``, ``entropy_coeff``, ``grad_clip`` | PPO clip range, entropy bonus, gradient clipping | 0.2, 0.0, 1.0 |
-| ``eval_episodes`` | evaluation episodes at the end (seeds 10 000 +), against the reference | 4 |
+| ``learning_rate``, ``gamma``, ``gae_lambda`` | Adam learning rate, discount, GAE λ | 3e-4, 0.99, 0.95 |
+| ``clip_range``, ``ent_coef``, ``max_grad_norm`` | PPO clip range, entropy bonus, gradient clipping | 0.2, 0.0, 1.0 |
+| ``eval_episodes`` | evaluation episodes at the end (``baselines.seeds.evaluation_seeds``), against the reference | 4 |
 
-The run folder gets ``config.yaml`` (resolved, with the seed), ``checkpoint/``
-(RLlib's own algorithm checkpoint, ``Algorithm.from_checkpoint`` restores
-it), ``progress.csv`` (per iteration: formation-steps, vessel-steps, seconds,
-RLlib's mean episode return), ``cluster.json`` (the Ray nodes, and the node
-of every env runner) and ``evaluation.json`` (the learned policy's and the
-reference's mean return over the same seeds). ``python -m baselines.evaluate
+The keys are SB3's names, as in every trainer of this project; the trainer maps them to RLlib's
+(``num_envs_per_env_runner``, ``minibatch_size``, ``num_epochs``, ``lr``, ``lambda_``, ``clip_param``,
+``entropy_coeff``, ``grad_clip``), and a config that uses RLlib's names is refused naming the new one.
+
+The run folder (``training.run_folder``) gets ``config.yaml`` (resolved, with
+``trainer: rllib`` and the seed), ``checkpoint/`` (RLlib's own algorithm checkpoint,
+``Algorithm.from_checkpoint`` restores it), ``progress.csv`` (per iteration: the shared
+columns, then ``iteration`` and ``env_steps``; ``episode_return_mean`` is RLlib's mean episode
+return, the sum over the team, divided by the number of vessels), ``cluster.json`` (the Ray
+nodes, and the node of every env runner) and ``evaluation.json``
+(``training.learned.evaluate_run``). ``python -m baselines.evaluate
 --policy RUN_FOLDER`` evaluates it next to the reference.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import time
 from collections.abc import Sequence
@@ -58,11 +61,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from baselines.ray_cluster import RAY_MISSING, connect
+from baselines.runs import run_folder_of
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.cli import ArgumentParser, report_error
+from marine_formation_env.env import parallel_env
+from marine_formation_env.scenarios import make_config
 from training.config import (
+    RENAMED_KEYS,
     TrainConfigError,
     _fraction,
     _hidden,
@@ -71,33 +78,51 @@ from training.config import (
     _positive,
     _whole,
     add_run_arguments,
+    check_renamed,
     config_from_arguments,
 )
+from training.learned import evaluate_run
+from training.run_folder import PROGRESS_FILE, read_config, write_config, write_progress
 
-__all__ = ["DEFAULTS", "ENV_NAME", "MODULE_ID", "RLlibPolicy", "load_rllib_policy", "make_env", "resolve", "train"]
+__all__ = [
+    "DEFAULTS",
+    "ENV_NAME",
+    "MODULE_ID",
+    "RLlibPolicy",
+    "load_rllib_policy",
+    "load_rllib_run",
+    "make_env",
+    "resolve",
+    "train",
+]
 
 #: Every key a config may hold, with its default.
 DEFAULTS: dict[str, Any] = {
     "scenario": "paper",
     "env_kwargs": {},
     "num_env_runners": 2,
-    "num_envs_per_env_runner": 1,
+    "n_envs": 1,
     "env_runner_resources": {},
     "train_batch_size": 4000,
-    "minibatch_size": 1000,
-    "num_epochs": 4,
+    "batch_size": 1000,
+    "n_epochs": 4,
     "iterations": None,
     "total_env_steps": 1_000_000,
     "minutes": None,
     "hidden": [64, 64],
-    "lr": 3e-4,
+    "learning_rate": 3e-4,
     "gamma": 0.99,
-    "lambda": 0.95,
-    "clip_param": 0.2,
-    "entropy_coeff": 0.0,
-    "grad_clip": 1.0,
+    "gae_lambda": 0.95,
+    "clip_range": 0.2,
+    "ent_coef": 0.0,
+    "max_grad_norm": 1.0,
     "eval_episodes": 4,
 }
+
+#: RLlib's names of this trainer's keys that ``training.config.RENAMED_KEYS`` does not list.
+RENAMED = {**RENAMED_KEYS, "minibatch_size": "batch_size"}
+#: The trainer's own columns of ``progress.csv``, after ``training.run_folder.PROGRESS_COLUMNS``.
+PROGRESS_OWN_COLUMNS = ("iteration", "env_steps")
 
 #: The name the env is registered under with Ray Tune's registry.
 ENV_NAME = "marine_formation_env"
@@ -110,6 +135,7 @@ MODULE_PATH = Path("learner_group") / "learner" / "rl_module" / MODULE_ID
 
 def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     """The config with defaults filled in and every value checked (``TrainConfigError`` names the bad one)."""
+    check_renamed(raw, RENAMED)
     unknown = sorted(set(raw) - set(DEFAULTS) - {"seed"})
     if unknown:
         raise TrainConfigError(f"unknown key(s) {unknown}; valid keys: {sorted(DEFAULTS)}")
@@ -117,33 +143,31 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
     if not isinstance(cfg["env_kwargs"], dict):
         raise TrainConfigError(f"env_kwargs must be a mapping, got {cfg['env_kwargs']!r}")
     cfg["num_env_runners"] = _whole("num_env_runners", cfg["num_env_runners"], 0)
-    for key in ("num_envs_per_env_runner", "train_batch_size", "minibatch_size", "num_epochs", "eval_episodes"):
+    for key in ("n_envs", "train_batch_size", "batch_size", "n_epochs", "eval_episodes"):
         cfg[key] = _whole(key, cfg[key], 1)
     cfg["total_env_steps"] = _whole("total_env_steps", cfg["total_env_steps"], 1)
     if cfg["iterations"] is not None:
         cfg["iterations"] = _whole("iterations", cfg["iterations"], 1)
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
-    for key in ("lr", "clip_param", "grad_clip"):
+    for key in ("learning_rate", "clip_range", "max_grad_norm"):
         cfg[key] = _positive(key, cfg[key])
-    for key in ("gamma", "lambda"):
+    for key in ("gamma", "gae_lambda"):
         cfg[key] = _fraction(key, cfg[key])
-    cfg["entropy_coeff"] = _non_negative("entropy_coeff", cfg["entropy_coeff"])
+    cfg["ent_coef"] = _non_negative("ent_coef", cfg["ent_coef"])
     cfg["hidden"] = _hidden(cfg["hidden"])
     resources = cfg["env_runner_resources"]
     if not isinstance(resources, dict) or not all(
         isinstance(k, str) and _number(f"env_runner_resources.{k}", v) > 0 for k, v in resources.items()
     ):
         raise TrainConfigError(f"env_runner_resources must map resource names to amounts > 0, got {resources!r}")
-    from marine_formation_env.scenarios import make_config
-
     try:
         scenario = make_config(cfg["scenario"], **cfg["env_kwargs"])
     except (ValueError, TypeError) as err:
         raise TrainConfigError(f"scenario {cfg['scenario']!r} with env_kwargs {cfg['env_kwargs']}: {err}") from err
-    if cfg["minibatch_size"] > cfg["train_batch_size"] * scenario.n_vessels:
+    if cfg["batch_size"] > cfg["train_batch_size"] * scenario.n_vessels:
         raise TrainConfigError(
-            f"minibatch_size = {cfg['minibatch_size']} vessel-steps exceeds a batch of "
+            f"batch_size = {cfg['batch_size']} vessel-steps exceeds a batch of "
             f"{cfg['train_batch_size']} × {scenario.n_vessels} vessel-steps"
         )
     return cfg
@@ -152,8 +176,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
 def make_env(env_config: dict[str, Any]) -> Any:
     """The env creator RLlib calls on every env runner: ``ParallelPettingZooEnv(parallel_env(...))``."""
     from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
-
-    from marine_formation_env.env import parallel_env
 
     return ParallelPettingZooEnv(parallel_env(env_config["scenario"], **env_config["env_kwargs"]))
 
@@ -175,20 +197,20 @@ def algorithm_config(cfg: dict[str, Any]) -> Any:
         .multi_agent(policies={MODULE_ID}, policy_mapping_fn=_shared_module)
         .env_runners(
             num_env_runners=cfg["num_env_runners"],
-            num_envs_per_env_runner=cfg["num_envs_per_env_runner"],
+            num_envs_per_env_runner=cfg["n_envs"],
             custom_resources_per_env_runner=dict(cfg["env_runner_resources"]),
             rollout_fragment_length="auto",
         )
         .training(
             train_batch_size_per_learner=cfg["train_batch_size"],
-            minibatch_size=cfg["minibatch_size"],
-            num_epochs=cfg["num_epochs"],
-            lr=cfg["lr"],
+            minibatch_size=cfg["batch_size"],
+            num_epochs=cfg["n_epochs"],
+            lr=cfg["learning_rate"],
             gamma=cfg["gamma"],
-            lambda_=cfg["lambda"],
-            clip_param=cfg["clip_param"],
-            entropy_coeff=cfg["entropy_coeff"],
-            grad_clip=cfg["grad_clip"],
+            lambda_=cfg["gae_lambda"],
+            clip_param=cfg["clip_range"],
+            entropy_coeff=cfg["ent_coef"],
+            grad_clip=cfg["max_grad_norm"],
         )
         .rl_module(model_config=DefaultModelConfig(fcnet_hiddens=cfg["hidden"], fcnet_activation="tanh"))
         .debugging(seed=cfg["seed"])
@@ -219,7 +241,7 @@ class RLlibPolicy:
         return np.clip(mean, -1.0, 1.0).astype(np.float32).reshape(*obs.shape[:-1], self.action_dim)
 
     def act(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The PettingZoo-dict form of :meth:`act_batch`."""
+        """The PettingZoo-dict form of ``act_batch``."""
         agents = list(observations)
         actions = self.act_batch(np.stack([observations[a] for a in agents]))
         return dict(zip(agents, actions, strict=True))
@@ -243,18 +265,31 @@ def load_rllib_policy(folder: str | Path) -> tuple[RLlibPolicy, dict[str, Any]]:
     try:
         from ray.rllib.core.rl_module.rl_module import RLModule
     except ImportError:
-        from baselines.ray_cluster import RAY_MISSING
-
         raise ImportError(RAY_MISSING) from None
     try:
-        config = yaml.safe_load((run / "config.yaml").read_text())
+        config = read_config(run)
         module = RLModule.from_checkpoint(module_dir)
         observation_dim = int(module.observation_space.shape[0])
         action_dim = int(module.action_space.shape[0])
-    except (OSError, KeyError, ValueError, TypeError, AttributeError, yaml.YAMLError) as err:
+    except (OSError, KeyError, ValueError, TypeError, AttributeError) as err:
         raise ValueError(f"cannot load the RLlib policy in {str(run)!r}: {type(err).__name__}: {err}") from err
     module.eval()
     return RLlibPolicy(module, observation_dim, action_dim), config
+
+
+def load_rllib_run(run: Path, deterministic: bool = True) -> tuple[RLlibPolicy, dict[str, Any]]:
+    """The policy of a ``training.rllib_ppo`` run folder and its ``config.yaml``.
+
+    The loader of the ``rllib`` entry point of ``marine_formation_env.trainers``; the policy acts with the
+    Gaussian's mean (deterministically) only.
+
+    Raises:
+        ValueError: ``deterministic`` is false, or the checkpoint is not readable as this trainer's.
+    """
+    run = run_folder_of(run)
+    if not deterministic:
+        raise ValueError(f"the policy of the RLlib run {str(run)!r} acts deterministically only")
+    return load_rllib_policy(run)
 
 
 def _env_runner_nodes(algo: Any) -> list[str]:
@@ -275,13 +310,10 @@ def train(cfg: dict[str, Any], out: Path, address: str | None = None, progress: 
     """Train with the resolved ``cfg`` into ``out``; returns the evaluation summary (also in ``evaluation.json``)."""
     from tqdm import tqdm
 
-    from baselines.ray_cluster import connect
-    from marine_formation_env.scenarios import make_config
-
     ray = connect(address or "local")
     n = make_config(cfg["scenario"], **cfg["env_kwargs"]).n_vessels
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
+    write_config(out, "rllib", cfg, cfg["seed"])
     algo = algorithm_config(cfg).build_algo()
     try:
         nodes = {
@@ -306,17 +338,18 @@ def train(cfg: dict[str, Any], out: Path, address: str | None = None, progress: 
             bar.update(new_steps - steps)
             steps = new_steps
             elapsed = time.perf_counter() - begin
-            episode_return = runners.get("episode_return_mean")
+            team_return = runners.get("episode_return_mean")  # RLlib's: summed over every vessel of the team
             rows.append(
                 {
+                    "vessel_steps": steps * n,
+                    "wall_time_s": round(elapsed, 3),
+                    "episode_return_mean": "" if team_return is None else float(team_return) / n,
+                    "episodes": int(runners.get("num_episodes", 0)) * n,  # counted per vessel, as the others
                     "iteration": len(rows) + 1,
                     "env_steps": steps,
-                    "vessel_steps": steps * n,
-                    "seconds": round(elapsed, 3),
-                    "episode_return_mean": None if episode_return is None else float(episode_return),
                 }
             )
-            if rows[-1]["episode_return_mean"] is not None:
+            if rows[-1]["episode_return_mean"] != "":
                 bar.set_postfix(ret=f"{rows[-1]['episode_return_mean']:.1f}")
             if cfg["iterations"] is not None and len(rows) >= cfg["iterations"]:
                 break
@@ -329,20 +362,13 @@ def train(cfg: dict[str, Any], out: Path, address: str | None = None, progress: 
         _save_checkpoint(algo, out)
     finally:
         algo.stop()
-    from training.learned import evaluate_run
-
     policy, _ = load_rllib_policy(out)
     last = rows[-1]
-    return evaluate_run(out, policy, cfg, last["env_steps"], last["vessel_steps"], last["seconds"])
+    return evaluate_run(out, policy, cfg, vessel_steps=last["vessel_steps"], wall_time_s=last["wall_time_s"])
 
 
 def _save_progress(out: Path, rows: list[dict[str, Any]]) -> None:
-    text = io.StringIO()
-    fields = ["iteration", "env_steps", "vessel_steps", "seconds", "episode_return_mean"]
-    writer = csv.DictWriter(text, fieldnames=fields)
-    writer.writeheader()
-    writer.writerows(rows)
-    atomic_write_text(out / "progress.csv", text.getvalue())
+    write_progress(out / PROGRESS_FILE, rows, PROGRESS_OWN_COLUMNS)
 
 
 def _save_checkpoint(algo: Any, out: Path) -> None:

@@ -1,21 +1,37 @@
 """Run folders that never lose or corrupt work: atomic writes, checkpoints, resume bookkeeping.
 
 Every file of a run folder is written **atomically**
-(:func:`atomic_write`, on top of :func:`marine_formation_env.atomic.atomic_path`):
+(``atomic_write``, on top of ``marine_formation_env.atomic.atomic_path``):
 the bytes go to a temporary file in the same folder
 (``.<name>.<random>.tmp<suffix>``), which is flushed and ``fsync``-ed and then
-renamed over the final name with :func:`os.replace` (the folder is
+renamed over the final name with ``os.replace`` (the folder is
 ``fsync``-ed too). A reader, or a process killed at any instant, sees either
 the old file or the new one, never half of one; a kill leaves at most a stale
-temporary file, which :func:`recover` removes.
+temporary file, which ``recover`` removes.
 
 Files that belong together are replaced together: ``best_model.zip``,
 ``best_vecnormalize.pkl`` and ``best_model.json`` (the JSON records the score
 of that model with those statistics), and the final ``model.zip`` with
-``vecnormalize.pkl``. :func:`write_together` stages all of them, then writes a
+``vecnormalize.pkl``. ``write_together`` stages all of them, then writes a
 small journal (``.commit.json``, atomically: the commit point) naming the
-renames, then performs them and removes the journal. :func:`recover` finishes
+renames, then performs them and removes the journal. ``recover`` finishes
 a journal a kill interrupted, so such files always come from the same model.
+
+Every run folder, whatever its trainer, holds the same four things
+(``CONFIG_FILE``, ``PROGRESS_FILE``, ``EVALUATION_FILE`` and the
+trainer's policy file):
+
+* ``config.yaml``: one flat mapping, the resolved config with three more
+  top-level fields: ``trainer`` (``sb3``, ``torchrl`` or ``rllib``: the kind of
+  run folder, read by ``read_config``, never guessed from the files),
+  ``env_id`` and ``seed`` (``config_record``);
+* ``progress.csv``: one row per iteration (per rollout for SB3), the shared
+  columns ``PROGRESS_COLUMNS`` first, then the trainer's own;
+* ``evaluation.json``: the learned policy and the reference on
+  ``baselines.seeds.evaluation_seeds(eval_episodes)``
+  (``training.learned.evaluate_run``);
+* the policy: ``model.zip`` and ``vecnormalize.pkl`` (SB3), ``policy.pt``
+  (TorchRL), ``checkpoint/`` (RLlib).
 
 Checkpoints keep SB3's names: ``checkpoints/model_<N>_steps.zip`` and
 ``checkpoints/model_vecnormalize_<N>_steps.pkl``; the statistics are written
@@ -39,16 +55,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+import yaml
+
+from baselines.runs import CONFIG_FILE, RunFolderError, read_config
+from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import TEMP_MARK, atomic_path, fsync_folder, temporary_beside
 
 __all__ = [
     "ARTIFACTS",
+    "CONFIG_FILE",
+    "EVALUATION_FILE",
+    "PROGRESS_COLUMNS",
+    "PROGRESS_FILE",
+    "TRAINERS",
     "Checkpoint",
+    "RunFolderError",
     "atomic_write",
     "checkpoint_problem",
+    "config_record",
     "list_checkpoints",
     "present_artifacts",
     "read_best",
+    "read_config",
     "read_evaluations",
     "recover",
     "remove_artifacts",
@@ -59,24 +87,38 @@ __all__ = [
     "temporaries",
     "truncate_evaluations",
     "write_bytes",
+    "write_config",
     "write_evaluations",
+    "write_progress",
     "write_together",
 ]
 
-#: Names of the temporary files of :func:`atomic_write` and :func:`write_together`: ``.NAME.<random>.tmp<suffix>``.
+#: The learning curve: ``PROGRESS_COLUMNS``, then the trainer's own columns.
+PROGRESS_FILE = "progress.csv"
+#: The closing evaluation on the evaluation seeds (``training.learned.evaluate_run``).
+EVALUATION_FILE = "evaluation.json"
+#: The values of ``config.yaml``'s ``trainer`` field.
+TRAINERS = ("sb3", "torchrl", "rllib")
+#: The first columns of every trainer's ``progress.csv``, in this order: vessel-steps trained so far, wall-clock
+#: seconds since the start of training, the mean return per vessel of the training episodes that ended in the row
+#: (the env's reward as the learner saw it; empty when none ended) and their number.
+PROGRESS_COLUMNS = ("vessel_steps", "wall_time_s", "episode_return_mean", "episodes")
+
+#: Names of the temporary files of ``atomic_write`` and ``write_together``: ``.NAME.<random>.tmp<suffix>``.
 _TEMP_RE = re.compile(rf"\..+\.[A-Za-z0-9_]+{re.escape(TEMP_MARK)}(\.[A-Za-z0-9_]+)?")
-#: The journal of :func:`write_together`.
+#: The journal of ``write_together``.
 JOURNAL = ".commit.json"
 #: What a run leaves in its folder; a new run refuses a folder holding any of them (``--overwrite`` removes them).
 ARTIFACTS = (
-    "config.yaml",
+    CONFIG_FILE,
     "model.zip",
     "vecnormalize.pkl",
     "best_model.zip",
     "best_vecnormalize.pkl",
     "best_model.json",
     "evaluations.csv",
-    "progress.csv",
+    PROGRESS_FILE,
+    EVALUATION_FILE,
     "tb",
     "checkpoints",
     JOURNAL,
@@ -106,7 +148,7 @@ def atomic_write(path: str | Path) -> Iterator[IO[bytes]]:
 
     The file is a temporary one in the same folder; after the ``with`` body it
     is closed, ``fsync``-ed and renamed over ``path`` (``os.replace``, by
-    :func:`marine_formation_env.atomic.atomic_path`). If the body raises, the
+    ``marine_formation_env.atomic.atomic_path``). If the body raises, the
     temporary file is removed and ``path`` is untouched.
     """
     path = Path(path)
@@ -139,7 +181,7 @@ def write_together(folder: Path, writers: dict[str, Callable[[IO[bytes]], Any]])
     Each ``writers[name](file)`` writes the new content of ``folder/name``. All
     are staged (written, fsync-ed) first; then the journal naming the renames is
     written atomically (the commit point); then the renames happen and the
-    journal is removed. :func:`recover` completes a committed journal.
+    journal is removed. ``recover`` completes a committed journal.
     """
     folder.mkdir(parents=True, exist_ok=True)
     staged: list[tuple[str, str]] = []
@@ -179,7 +221,7 @@ def temporaries(folder: Path) -> list[Path]:
 
 
 def recover(folder: Path) -> list[str]:
-    """Finish an interrupted :func:`write_together` and remove stale temporary files.
+    """Finish an interrupted ``write_together`` and remove stale temporary files.
 
     Returns one line per action taken (for the log).
     """
@@ -266,7 +308,7 @@ def save_checkpoint(model: Any, out: Path, steps: int | None = None) -> Path:
 
 
 def save_final(model: Any, out: Path, model_name: str = "model.zip", stats_name: str = "vecnormalize.pkl") -> None:
-    """Save ``model`` and its VecNormalize statistics (if any) as a pair (:func:`write_together`)."""
+    """Save ``model`` and its VecNormalize statistics (if any) as a pair (``write_together``)."""
     writers: dict[str, Callable[[IO[bytes]], Any]] = {model_name: model.save}
     normalizer = model.get_vec_normalize_env()
     if normalizer is not None:
@@ -278,12 +320,12 @@ def save_final(model: Any, out: Path, model_name: str = "model.zip", stats_name:
 
 
 def present_artifacts(out: Path) -> list[str]:
-    """The :data:`ARTIFACTS` of another run present in ``out``."""
+    """The ``ARTIFACTS`` of another run present in ``out``."""
     return [name for name in ARTIFACTS if (out / name).exists()]
 
 
 def remove_artifacts(out: Path) -> None:
-    """Remove every :data:`ARTIFACT <ARTIFACTS>` (and stale temporary file) from ``out``."""
+    """Remove every ``ARTIFACT`` (and stale temporary file) from ``out``."""
     for name in ARTIFACTS:
         path = out / name
         if path.is_dir() and not path.is_symlink():
@@ -342,3 +384,30 @@ def read_best(out: Path) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return record if isinstance(record, dict) and "return_learned" in record else None
+
+
+# --------------------------------------------------------------------------- the run-folder contract
+
+
+def config_record(trainer: str, resolved: dict[str, Any], seed: int) -> dict[str, Any]:
+    """What ``config.yaml`` holds: ``trainer``, ``env_id`` and ``seed``, then the resolved config's keys."""
+    if trainer not in TRAINERS:
+        raise ValueError(f"trainer must be one of {list(TRAINERS)}, got {trainer!r}")
+    rest = {k: v for k, v in resolved.items() if k not in ("trainer", "env_id", "seed")}
+    return {"trainer": trainer, "env_id": ENV_ID, "seed": int(seed), **rest}
+
+
+def write_config(out: Path, trainer: str, resolved: dict[str, Any], seed: int) -> dict[str, Any]:
+    """Write ``out/config.yaml`` (``config_record``) atomically; return the record."""
+    record = config_record(trainer, resolved, seed)
+    write_bytes(out / CONFIG_FILE, yaml.safe_dump(record, sort_keys=False, allow_unicode=True).encode())
+    return record
+
+
+def write_progress(path: Path, rows: list[dict[str, Any]], own_columns: tuple[str, ...] = ()) -> None:
+    """Write ``progress.csv`` atomically: ``PROGRESS_COLUMNS``, then ``own_columns`` (the trainer's)."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=[*PROGRESS_COLUMNS, *own_columns])
+    writer.writeheader()
+    writer.writerows(rows)
+    write_bytes(path, text.getvalue().encode())

@@ -2,19 +2,19 @@
 
 A vessel's observation is its own part (10 entries) and one 4-entry slot per
 other vessel (``marine_formation_env.rules``); the link bit of a slot says
-whether anything was heard from that vessel. :class:`SlotFeatures` reads
+whether anything was heard from that vessel. ``SlotFeatures`` reads
 them as a set:
 
 * the own lane offset D_y is read as κ·D_y (the path's curvature times
   D_y, the only way the curved-path law uses it), which is 0 on a straight
   path: raw, it grows with the team and biased the first any-team policy
-  by each vessel's lane (:func:`baselines.pretrained.own_inputs`);
+  by each vessel's lane (``baselines.pretrained.own_inputs``);
 * each slot's Δθ is read as predicted to now from the message's velocity
   and age, ``Δθ − ẋ_i·age`` (what ``reference:extrapolate`` does; the same
   Δθ over an ideal link, where the age is 0), so over a lossy, delayed
   channel the network need not learn that product itself;
-* every entry is divided by a fixed scale (:data:`OWN_SCALE`,
-  :data:`SLOT_SCALE`: metres by 50, speeds by 5, …), not by running
+* every entry is divided by a fixed scale (``OWN_SCALE``,
+  ``SLOT_SCALE``: metres by 50, speeds by 5, …), not by running
   statistics, so the same weights read every team size and the link bit
   stays a mask;
 * each slot k becomes a message ``m_k = φ([own, slot_k])`` (an MLP, tanh);
@@ -24,10 +24,6 @@ them as a set:
   hears many;
 * the features are ``[ψ(own), sum, mean]``; SB3's ``net_arch`` layers and
   action head follow, as for ``MlpPolicy``;
-* with ``speed_error = s`` [m/s] (default None: off) the own inputs gain one
-  entry, ``tanh((u − u_d)/s)``: the own speed error, which the fixed scales
-  above leave at 0.024 of an input for a 0.12 m/s offset (u and u_d are each
-  divided by 5 m/s), read steeply near 0 and bounded far from it;
 * with ``zero_at_agreement = True`` (default False) each message is measured
   from the message of a neighbour in agreement, ``m_k = φ([own, slot_k]) −
   φ([own, slot_k⁰])``, where ``slot_k⁰`` keeps the link bit and the age but
@@ -35,9 +31,7 @@ them as a set:
   paper's law (20), whose sum over the in-neighbours is 0 at agreement. A
   vessel whose neighbours all agree then commands what a vessel that hears
   no one does, so a chain has no steady offset per link for its length to
-  multiply (without it, the ``any_n_speed`` row's earlier policies ended
-  chains of 20 with every follower 0.06–0.11 m off the vessel it hears; with
-  it, three seeds ended them at 0.00 m: docs/results.md).
+  multiply.
 
 Nothing depends on the number of slots, so the weights trained on teams of 3
 to 6 (observations padded to one length with ``observation_slots``) act in a
@@ -49,13 +43,11 @@ team of 20, whose observations have 19 slots. Config (``training.train``)::
       features_extractor_kwargs: {hidden: 64}
       net_arch: [64, 64]
 
-:func:`baselines.pretrained.slot_features` is the same function in numpy
+``baselines.pretrained.slot_features`` is the same function in numpy
 (pretrained policies run without torch).
 """
 
 from __future__ import annotations
-
-import math
 
 import torch
 from gymnasium import spaces
@@ -63,7 +55,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 from baselines.pretrained import AGREEMENT_MASK, OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import DESIRED_SPEED, OWN_SIZE, SLOT_SIZE, SURGE, slot_count
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
 from training.inputs import predicted_inputs
 
 __all__ = ["SlotFeatures"]
@@ -76,13 +68,9 @@ class SlotFeatures(BaseFeaturesExtractor):
         self,
         observation_space: spaces.Box,
         hidden: int = 64,
-        speed_error: float | None = None,
         zero_at_agreement: bool = False,
     ) -> None:
         slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
-        ok = isinstance(speed_error, int | float) and not isinstance(speed_error, bool) and 0 < speed_error < math.inf
-        if speed_error is not None and not ok:
-            raise ValueError(f"speed_error must be a speed scale > 0 [m/s] or None, got {speed_error!r}")
         if not isinstance(zero_at_agreement, bool):
             raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
@@ -90,27 +78,19 @@ class SlotFeatures(BaseFeaturesExtractor):
         self.zero_at_agreement = zero_at_agreement
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
-        self.speed_error_scale: torch.Tensor
         self.agreement_mask: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
-        self.speed_error = None if speed_error is None else float(speed_error)
-        own_size = OWN_SIZE if speed_error is None else OWN_SIZE + 1
-        if self.speed_error is not None:  # a buffer only when on: networks saved without it still load strictly
-            self.register_buffer("speed_error_scale", torch.tensor(self.speed_error, dtype=torch.float32))
         if zero_at_agreement:  # not saved (persistent=False): it is a constant, and old state_dicts load strictly
             self.register_buffer("agreement_mask", torch.tensor(AGREEMENT_MASK, dtype=torch.float32), persistent=False)
         self.message = nn.Sequential(
-            nn.Linear(own_size + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
+            nn.Linear(OWN_SIZE + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
-        self.own = nn.Sequential(nn.Linear(own_size, hidden), nn.Tanh())
+        self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
         own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
-        if self.speed_error is not None:
-            error = observations[..., SURGE : SURGE + 1] - observations[..., DESIRED_SPEED : DESIRED_SPEED + 1]
-            own = torch.cat([own, torch.tanh(error / self.speed_error_scale)], dim=-1)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))

@@ -2,7 +2,7 @@
 
 CAPS (Mysore, Mabsout, Mancuso and Saenko, "Regularizing Action Policies for
 Smooth Control with Reinforcement Learning", ICRA 2021) adds to the policy's
-loss the distance between its actions at consecutive states. :class:`SmoothPPO`
+loss the distance between its actions at consecutive states. ``SmoothPPO``
 is SB3's PPO with that term as the hyperparameter ``temporal_smoothness``
 (λ ≥ 0, default 0: exactly PPO). Every minibatch step of PPO's epochs
 minimizes PPO's loss plus
@@ -18,24 +18,20 @@ noise-free action. Both terms share one backward pass, one gradient
 clipping and one optimizer step, so λ weighs the term against PPO's own
 gradient.
 
-Unlike a cost on action changes in the learner's reward
-(:class:`training.vec_env.ActionChangePenalty`, which sees the sampled and
-clipped actions), this term does not charge the exploration noise and gives
-nothing for holding an action beyond the bounds of the action space; the
-reward, the returns the run logs and every evaluation are unchanged. The
+Unlike a cost on action changes in the learner's reward, this term does not
+charge the exploration noise and gives nothing for holding an action beyond
+the bounds of the action space; the reward, the returns the run logs and
+every evaluation are unchanged. The
 run's TensorBoard gets ``train/temporal_smoothness_loss`` (the mean distance
 over the update's steps, without λ).
 
-Before commit e841afb the term was a separate pass of optimizer steps after
-PPO's epochs. Adam normalizes each parameter's step by the running size of
-its gradients, so the weight of a loss stepped on its own barely sets the
-size of the step: λ = 1 and λ = 0.1 collapsed the same run alike
-(docs/results.md).
+The term is part of PPO's loss, not a separate pass of optimizer steps:
+Adam normalizes each parameter's step by the running size of its gradients,
+so the weight of a loss stepped on its own would barely set the size of the
+step.
 
-:class:`SmoothnessTerm` is the term itself, for any policy whose mean is a
-differentiable function of the observation; the TorchRL trainer
-(``training.torchrl_ppo``, key ``temporal_smoothness``) adds it to its PPO
-loss too.
+``SmoothnessTerm`` is the term itself, for any policy whose mean is a
+differentiable function of the observation.
 """
 
 from __future__ import annotations
@@ -74,7 +70,7 @@ class SmoothnessTerm:
     trailing shape ``mean`` takes). Each call takes the next ``batch_size`` pairs of a shuffled
     order (``rng``), reshuffling once every pair has been used, and returns the weighted distance
     as a tensor with gradients, to be added to the loss of one optimizer step.
-    :attr:`distances` lists the distance of each call, without the weight; :attr:`mean_distance` is
+    ``distances`` lists the distance of each call, without the weight; ``mean_distance`` is
     their mean.
     """
 

@@ -8,19 +8,23 @@ Example::
     python -m training.train --resume --out runs/paper_speed        # continue from the last checkpoint
     python -m training.train --resume --out runs/paper_speed --set n_timesteps=4e6   # ... and train longer
 
-The run folder gets ``config.yaml`` (the resolved config, with the seed),
-``model.zip`` and ``vecnormalize.pkl`` (the final policy and its observation
-statistics), ``best_model.zip`` + ``best_vecnormalize.pkl`` (best evaluation
-against the reference; ``best_model.json`` records its score and step),
-``checkpoints/`` (``model_<N>_steps.zip`` + ``model_vecnormalize_<N>_steps.pkl``,
-including one at step 0), ``evaluations.csv``, ``progress.csv`` (the learning
-curve: per rollout, vessel-steps, seconds and the mean return of the training
-episodes that ended, :class:`~training.callbacks.ProgressLog`) and TensorBoard
+The run folder gets ``config.yaml`` (the resolved config with ``trainer: sb3``,
+``env_id`` and the seed: ``training.run_folder.write_config``), ``model.zip``
+and ``vecnormalize.pkl`` (the final policy and its observation statistics),
+``evaluation.json`` (the final policy and the reference on
+``baselines.seeds.evaluation_seeds(eval_episodes)``, written when training ends),
+``best_model.zip`` + ``best_vecnormalize.pkl`` (best evaluation against the
+reference; ``best_model.json`` records its score and step), ``checkpoints/``
+(``model_<N>_steps.zip`` + ``model_vecnormalize_<N>_steps.pkl``, including one
+at step 0), ``evaluations.csv`` (the evaluations during training, on
+``baselines.seeds.development_seeds``), ``progress.csv`` (the learning curve,
+one row per rollout: ``training.run_folder.PROGRESS_COLUMNS``,
+``ProgressLog``) and TensorBoard
 logs in ``tb/`` (``tensorboard --logdir runs``).
 
 The run folder never holds half-written files: every file above is written
 to a temporary file in the same folder, flushed and fsync-ed, then renamed
-over its name (:mod:`training.run_folder`); the three ``best_*`` files, and
+over its name (``training.run_folder``); the three ``best_*`` files, and
 ``model.zip`` with ``vecnormalize.pkl``, are replaced together (a journal that
 the next start completes). A run killed at any instant can be resumed.
 
@@ -28,7 +32,8 @@ Rules:
 
 * A new run refuses a folder that holds anything of another run
   (``config.yaml``, ``model.zip``, ``vecnormalize.pkl``, ``best_model.*``,
-  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``progress.csv``, ``tb/``, ``checkpoints/``);
+  ``best_vecnormalize.pkl``, ``evaluations.csv``, ``progress.csv``, ``evaluation.json``, ``tb/``,
+  ``checkpoints/``);
   ``--overwrite`` removes those first (only once the new config has been
   checked, by building the algorithm on the real env).
 * ``--resume`` continues from the newest *readable* checkpoint: empty,
@@ -59,9 +64,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-from marine_formation_env import ENV_ID
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from training import run_folder
 from training.config import (
@@ -71,9 +73,13 @@ from training.config import (
     algo_kwargs,
     apply_overrides,
     config_differences,
+    curriculum_spread,
     load_config,
+    team_overrides,
+    training_env_kwargs,
     validate,
 )
+from training.learned import evaluate_run, load_sb3_run
 
 __all__ = [
     "NoCheckpointError",
@@ -94,7 +100,7 @@ class NoCheckpointError(FileNotFoundError):
 
 
 class TrainingInterrupted(KeyboardInterrupt):
-    """Training stopped on SIGINT after saving the checkpoint :attr:`path` at :attr:`steps` vessel-steps."""
+    """Training stopped on SIGINT after saving the checkpoint ``path`` at ``steps`` vessel-steps."""
 
     def __init__(self, path: Path, steps: int) -> None:
         super().__init__(f"interrupted at {steps} steps; saved {path}")
@@ -106,8 +112,7 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     """The SB3 training env: shared-policy adapter, episode monitor, optional VecNormalize."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from training.config import team_overrides, training_env_kwargs
-    from training.vec_env import ActionChangePenalty, SharedPolicyVecEnv, TeamsVecEnv
+    from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
     teams = [training_env_kwargs(resolved, kw) for kw in team_overrides(resolved)]  # train_reward's shaping
     if len(teams) == 1:
@@ -115,8 +120,6 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     else:
         venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **kw) for kw in teams])
     venv.seed(seed)
-    if resolved["action_change_penalty"]:  # learner-side shaping, inside the monitor: the returns it logs include it
-        venv = ActionChangePenalty(venv, resolved["action_change_penalty"], venv.dt)
     venv = VecMonitor(venv)
     norm = resolved["normalize"]
     if norm:
@@ -127,7 +130,7 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
 
 
 def build_model(resolved: dict[str, Any], venv: Any, seed: int, verbose: int = 0, tensorboard_log: Any = None) -> Any:
-    """The algorithm on ``venv``; whatever its constructor rejects becomes a :class:`TrainConfigError`."""
+    """The algorithm on ``venv``; whatever its constructor rejects becomes a ``TrainConfigError``."""
     cls = algo_class(resolved["algo"])
     try:
         return cls(
@@ -200,7 +203,6 @@ def train(
     extra_callbacks: Sequence[Any] = (),
     verbose: int = 0,
     threads: int = 1,
-    config_record: dict[str, Any] | None = None,
     minutes: float | None = None,
 ) -> Any:
     """Train (or resume) and save into ``out``; return the model.
@@ -208,9 +210,9 @@ def train(
     ``minutes`` also stops training after that much wall time (the learning
     benchmarks' budget), and a ``lin_<x>`` learning rate then falls to 0 over
     whichever of it and ``n_timesteps`` runs out first
-    (:class:`~training.callbacks.BudgetSchedule`); a curriculum over the initial state
+    (``BudgetSchedule``); a curriculum over the initial state
     (``initial_state_curriculum``) then runs over whichever of it and
-    ``n_timesteps`` runs out first (:class:`~training.callbacks.InitialStateCurriculum`).
+    ``n_timesteps`` runs out first (``InitialStateCurriculum``).
     Before the first rollout the training env is set to the curriculum's first
     spread, so the very first episodes follow it too.
 
@@ -218,10 +220,10 @@ def train(
     2-core machine one thread leaves the other core to the simulation (measured:
     a small ``nn.Linear`` call took ~8 ms with 2 threads under load, 0.02 ms with 1).
 
-    ``config_record`` (e.g. the resolved config with its seed) is written to
-    ``out/config.yaml`` once the model is built or loaded, before training.
-    Stale temporary files in ``out`` are removed first and an interrupted
-    update of the best model is completed (:func:`training.run_folder.recover`).
+    ``out/config.yaml`` (``trainer: sb3``, ``env_id``, ``seed`` and ``resolved``) is written once the model is
+    built or loaded, before training; ``out/evaluation.json`` once training has ended
+    (``training.learned.evaluate_run``). Stale temporary files in ``out`` are removed first and an interrupted
+    update of the best model is completed (``training.run_folder.recover``).
 
     Raises:
         NoCheckpointError: ``resume`` and no checkpoint of ``out`` loads.
@@ -243,7 +245,6 @@ def train(
         StopRequest,
         WallClockBudget,
     )
-    from training.config import curriculum_spread
 
     out.mkdir(parents=True, exist_ok=True)
     for note in run_folder.recover(out):
@@ -256,9 +257,7 @@ def train(
             print(f"dropped {dropped} row(s) of evaluations.csv after step {steps}", file=sys.stderr)
     else:
         model = build_model(resolved, venv, seed, verbose=verbose, tensorboard_log=str(out / "tb"))
-    if config_record is not None:
-        text = yaml.safe_dump({ENV_ID: config_record}, sort_keys=False)
-        run_folder.write_bytes(out / "config.yaml", text.encode())
+    run_folder.write_config(out, "sb3", resolved, seed)
     stop = StopRequest()
     log = ProgressLog(out)
     if resume:
@@ -317,16 +316,25 @@ def train(
         if previous is not None:
             signal.signal(signal.SIGINT, previous)
     venv.close()
+    policy, _ = load_sb3_run(out)
+    wall_time = float(log.rows[-1]["wall_time_s"]) if log.rows else 0.0
+    evaluate_run(out, policy, resolved, vessel_steps=int(model.num_timesteps), wall_time_s=wall_time)
     return model
 
 
 def _resume_config(out: Path, config: Path | None, overrides: dict[str, Any], seed: int | None) -> tuple[Any, int]:
-    """The resolved config and seed of ``--resume``; refuses changes beyond :data:`RESUMABLE_KEYS`."""
-    saved = out / "config.yaml"
+    """The resolved config and seed of ``--resume``; refuses changes beyond ``RESUMABLE_KEYS``."""
+    saved = out / run_folder.CONFIG_FILE
     if not saved.is_file():
         raise TrainConfigError(f"--resume: {saved} does not exist")
-    stored = load_config(saved)
+    try:
+        stored = run_folder.read_config(out)
+    except run_folder.RunFolderError as err:
+        raise TrainConfigError(f"--resume: {err}") from None
+    if stored["trainer"] != "sb3":
+        raise TrainConfigError(f"--resume: {out} is a run of the {stored['trainer']} trainer, not of {PROG}")
     stored_seed = stored.pop("seed", 0)
+    stored = {k: v for k, v in stored.items() if k not in ("trainer", "env_id")}
     base = load_config(config) if config is not None else stored
     resolved = validate(apply_overrides(base, overrides))
     changed = [
@@ -398,7 +406,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             not args.quiet,
             verbose=args.verbose,
             threads=args.threads,
-            config_record={**resolved, "seed": seed},
         )
     except NoCheckpointError as err:
         parser.error(str(err))

@@ -1,9 +1,9 @@
 """Parameter sharing for Stable-Baselines3 without SuperSuit.
 
-:class:`SharedPolicyVecEnv` is an SB3 ``VecEnv`` in which every vessel of
+``SharedPolicyVecEnv`` is an SB3 ``VecEnv`` in which every vessel of
 every formation copy is one entry, so a single PPO/SAC policy drives all the
 vessels, each from its own masked observation. It is a thin adapter over the
-batched :class:`marine_formation_env.vector.MarineFormationVectorEnv` in its
+batched ``marine_formation_env.vector.MarineFormationVectorEnv`` in its
 ``agent`` layout with ``SAME_STEP`` autoreset: one batched physics path.
 
 Entry ``b·N + j`` is vessel ``j`` of formation ``b``. A formation's vessels
@@ -12,12 +12,9 @@ convention) and ``TimeLimit.truncated``, and the returned observations are
 already those of the next episode. ``seed(s)`` makes formation ``b`` start from
 ``s + b`` at the next ``reset()``, exactly as ``parallel_env(...).reset(seed=s + b)``.
 
-:class:`TeamsVecEnv` puts several of them side by side (teams of different
+``TeamsVecEnv`` puts several of them side by side (teams of different
 sizes or graphs whose observations share one length, ``observation_slots``):
 one policy trains on all of them at once.
-
-:class:`ActionChangePenalty` charges the learner for changing its action
-between control periods (learner-side shaping, never the benchmark's reward).
 """
 
 from __future__ import annotations
@@ -31,15 +28,13 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
-    VecEnvObs,
     VecEnvStepReturn,
-    VecEnvWrapper,
 )
 
 from marine_formation_env.frontend import REWARD_INFO_KEYS
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-__all__ = ["ActionChangePenalty", "SharedPolicyVecEnv", "TeamsVecEnv"]
+__all__ = ["SharedPolicyVecEnv", "TeamsVecEnv"]
 
 
 class SharedPolicyVecEnv(VecEnv):
@@ -145,7 +140,7 @@ class SharedPolicyVecEnv(VecEnv):
 
 
 class TeamsVecEnv(VecEnv):
-    """Several :class:`SharedPolicyVecEnv` (teams) as one SB3 ``VecEnv``: their entries one after the other.
+    """Several ``SharedPolicyVecEnv`` (teams) as one SB3 ``VecEnv``: their entries one after the other.
 
     Every team must have the same action space, control period and observation length (pad
     the observations with ``observation_slots``); the observation space is
@@ -257,62 +252,3 @@ class TeamsVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [None] * self.num_envs
-
-
-class ActionChangePenalty(VecEnvWrapper):
-    """The learner's reward minus ``dt·weight·mean_i |a_k,i − a_{k−1},i|`` per entry (a smoothness cost).
-
-    ``a_k`` is the entry's normalized action of period k, clipped to [−1, 1]
-    as the env applies it, and the mean runs over its components; the cost
-    is charged from an episode's second period on (nothing at its first,
-    after a reset or an entry's autoreset), in the units of the env's reward
-    (``dt·w·c``, as the effort term's ``dt·w·mean(a²)``), so a policy that
-    flips a command between −1 and +1 every period pays ``2·weight`` per
-    second. This shapes what the learner optimizes, as ``train_reward`` does;
-    the benchmark's reward, evaluations and exports do not see it. The
-    entry's info gets it as ``reward_action_change`` (≤ 0).
-
-    The env's terminal penalty charges the benchmark's worst cost rate for
-    the time an episode ends early and not this cost, so a weight that is
-    large against that rate (2.75 per second by default) would make ending
-    early pay; keep it well below.
-
-    Args:
-        venv: the training VecEnv (:class:`SharedPolicyVecEnv` or :class:`TeamsVecEnv`).
-        weight: the cost's weight w ≥ 0 [1/s].
-        dt: the control period [s].
-    """
-
-    def __init__(self, venv: VecEnv, weight: float, dt: float) -> None:
-        if not (np.isfinite(weight) and weight >= 0):
-            raise ValueError(f"the action-change weight must be a number >= 0, got {weight!r}")
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"the control period dt must be > 0, got {dt!r}")
-        super().__init__(venv)
-        self.weight = float(weight)
-        self.dt = float(dt)
-        self._actions: np.ndarray | None = None
-        # the last period's actions; an entry's first period (``_fresh``) is charged nothing whatever they hold
-        self._previous = np.zeros((self.num_envs, int(np.prod(self.action_space.shape or ()))))
-        self._fresh = np.ones(self.num_envs, dtype=bool)
-
-    def reset(self) -> VecEnvObs:
-        obs = self.venv.reset()
-        self._fresh[:] = True
-        return obs
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.clip(np.asarray(actions, dtype=np.float64).reshape(self.num_envs, -1), -1.0, 1.0)
-        self.venv.step_async(actions)
-
-    def step_wait(self) -> VecEnvStepReturn:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        if self._actions is None:
-            raise RuntimeError("step_wait() called without step_async()")
-        change = np.mean(np.abs(self._actions - self._previous), axis=-1)
-        cost = np.where(self._fresh, 0.0, self.dt * self.weight * change)
-        for info, value in zip(infos, cost, strict=True):
-            info["reward_action_change"] = -float(value)
-        self._previous, self._actions = self._actions, None
-        self._fresh = np.asarray(dones, dtype=bool).copy()  # these entries start a new episode next period
-        return obs, (rewards - cost).astype(rewards.dtype), dones, infos
