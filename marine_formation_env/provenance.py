@@ -6,7 +6,7 @@ it under the key ``provenance``, so that a number in the documentation can be
 traced to the code that measured it, the command that regenerates it and the
 machine it ran on::
 
-    {"commit": "1a2b3c4", "dirty": false, "command": "python -m baselines.sweep --out docs/sweep_paper",
+    {"commit": "<short hash of HEAD>", "dirty": false, "command": "python -m baselines.sweep --out docs/sweep_paper",
      "machine": "AMD EPYC 7B13, 2 cores, Linux x86_64, Python 3.11.7", "date": "2026-12-07"}
 
 ``commit`` is ``unknown`` outside a git checkout; ``dirty`` says whether the

@@ -40,6 +40,8 @@ from training.learned import load_learned_policy
 from training.slot_policy import SlotFeatures
 from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 REPO = Path(__file__).resolve().parents[1]
 ANY_N = REPO / "training" / "configs" / "any_n_speed_ppo.yaml"
 

@@ -62,3 +62,19 @@ def test_every_result_file_says_which_commit_command_and_machine_it_comes_from(p
         assert re.fullmatch(r"[0-9a-f]{7,40}", source["commit"]), source
         assert source["command"].startswith("python -m "), source
         assert "cores" in source["machine"] or "2-core" in source["machine"], source
+
+
+HISTORY = re.compile(r"\b(?=[0-9a-f]*[0-9])(?=[0-9a-f]*[a-f])[0-9a-f]{7,12}\b|\bissues? #?\d+", re.IGNORECASE)
+SOURCES = sorted(
+    p
+    for package in (*PACKAGES, "benchmarks", "hydra_plugins")
+    for pattern in ("*.py", "*.yaml")
+    for p in (ROOT / package).rglob(pattern)
+)
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_code_and_configs_say_what_a_thing_is_not_its_history(path):
+    """No commit hashes or issue numbers: history lives in the changelog and the experiment log."""
+    found = HISTORY.findall(path.read_text())
+    assert not found, f"{path.relative_to(ROOT)}: {found}"

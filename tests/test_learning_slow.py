@@ -18,6 +18,8 @@ from training.config import apply_overrides, load_config, validate
 from training.learned import ModelPolicy
 from training.train import train
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 CONFIG = Path(__file__).resolve().parents[1] / "training" / "configs" / "paper_speed_ppo.yaml"
 
 

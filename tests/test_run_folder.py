@@ -48,7 +48,7 @@ ENV_ID = "MarineFormation-v1"
 REPO = Path(__file__).resolve().parents[1]
 SPEED_CONFIG = REPO / "training" / "configs" / "paper_speed_ppo.yaml"
 PROG = "python -m training.train"
-#: The run artifacts a new run must not silently overwrite (the brief of issue 9 §3).
+#: The run artifacts a new run must not silently overwrite.
 ARTIFACTS = (
     "config.yaml",
     "model.zip",
@@ -709,6 +709,7 @@ def assert_run_folder_consistent(out: Path) -> None:
         PPO.load(out / "best_model.zip", device="cpu")
 
 
+@pytest.mark.slow  # seven training subprocesses killed at random points: about 25 s
 def test_sigkill_at_random_points_never_loses_the_run(tmp_path):
     out = tmp_path / "run"
     marker = tmp_path / "slow-checkpoint"

@@ -33,6 +33,8 @@ from training.config import load_config  # noqa: E402
 from training.learned import load_learned_policy  # noqa: E402
 from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 HEADER = (
     "vessel_steps,wall_time_s,episode_return_mean,episodes,frames,mean_reward,learning_rate,kl,updates,initial_spread"
 )

@@ -49,6 +49,8 @@ from training.config import (
 from training.learned import ModelPolicy, load_learned_policy
 from training.vec_env import SharedPolicyVecEnv
 
+pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
+
 ENV_ID = "MarineFormation-v1"
 REPO = Path(__file__).resolve().parents[1]
 CONFIGS = sorted((REPO / "training" / "configs").glob("*.yaml"))
