@@ -59,7 +59,7 @@ from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
 from marine_formation_env.cli import ArgumentParser
-from marine_formation_env.rules import CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
+from marine_formation_env.rules import COORDINATION, CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -252,13 +252,14 @@ def own_inputs(own: np.ndarray) -> np.ndarray:
     return out / OWN_SCALE
 
 
-def _own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of ``predicted_inputs``."""
+def own_and_slots(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of ``predicted_inputs``
+    (``training.inputs.own_and_slots`` is the same map in torch)."""
     obs = np.asarray(obs, dtype=np.float64)
     k = slot_count(obs.shape[-1])
     own = obs[..., :OWN_SIZE]
     slots = obs[..., OWN_SIZE:].reshape(*obs.shape[:-1], k, SLOT_SIZE).copy()
-    slots[..., 1] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
+    slots[..., COORDINATION] = predicted_coordination_error(own, slots)  # Δθ predicted to now (unchanged at age 0)
     return own_inputs(own), slots / SLOT_SCALE
 
 
@@ -270,7 +271,7 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
     ``SLOT_SCALE``. ``training.inputs.PredictedInputs`` is the same map in torch (``training.torchrl_ppo``'s
     ``inputs: predicted``).
     """
-    own, slots = _own_and_slots(obs)
+    own, slots = own_and_slots(obs)
     return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
 
 
@@ -307,7 +308,7 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
     ``zero_at_agreement`` (1) if each message is measured from that of a neighbour with Δθ = Δẋ = 0
     (``SlotFeatures(zero_at_agreement=True)``).
     """
-    own, slots = _own_and_slots(obs)
+    own, slots = own_and_slots(obs)
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
     messages = _message(np.concatenate([own_k, slots], axis=-1), weights)

@@ -2,7 +2,7 @@
 
 A vessel's observation is its own part (``OWN_SIZE`` entries) and one
 ``SLOT_SIZE``-entry slot per other vessel (``marine_formation_env.rules``).
-``predicted_inputs`` maps it, without learned parameters, to what
+``own_and_slots`` maps it, without learned parameters, to what
 ``training.slot_policy.SlotFeatures`` reads:
 
 * each slot's Δθ predicted to now from the message's velocity and age,
@@ -33,16 +33,23 @@ from torch import nn
 
 from baselines.pretrained import OWN_SCALE, SLOT_SCALE
 from marine_formation_env.rules import (
+    AGE,
+    COORDINATION,
+    CROSS_TRACK,
     CURVATURE,
+    HEADING,
     LANE_OFFSET,
     OWN_FEATURES,
     OWN_SIZE,
     SLOT_FEATURES,
     SLOT_SIZE,
+    SURGE,
+    SWAY,
+    VELOCITY,
     slot_count,
 )
 
-__all__ = ["DROPPABLE", "InputMask", "PredictedInputs", "dropped_mask", "predicted_inputs"]
+__all__ = ["DROPPABLE", "InputMask", "PredictedInputs", "dropped_mask", "own_and_slots"]
 
 #: The names ``dropped_mask`` takes: an own entry, or a slot entry (dropped from every slot).
 DROPPABLE = (*OWN_FEATURES, *SLOT_FEATURES)
@@ -63,10 +70,12 @@ def dropped_mask(dim: int, names: Sequence[str]) -> np.ndarray:
     return np.concatenate([own, np.tile(slot, slot_count(dim))])
 
 
-def predicted_inputs(
+def own_and_slots(
     observations: torch.Tensor, own_scale: torch.Tensor, slot_scale: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """The own inputs ``(..., OWN_SIZE)`` and the slots ``(..., K, SLOT_SIZE)`` of observations ``(..., dim)``.
+
+    ``baselines.pretrained.own_and_slots`` in torch, the scales given as tensors (a module's buffers).
 
     Raises:
         ValueError: the last dimension is not ``OWN_SIZE + SLOT_SIZE · K``.
@@ -74,18 +83,19 @@ def predicted_inputs(
     k = slot_count(observations.shape[-1])
     own = observations[..., :OWN_SIZE]
     slots = observations[..., OWN_SIZE:].reshape(*observations.shape[:-1], k, SLOT_SIZE)
-    e, psi, u, v = own[..., 0], own[..., 1], own[..., 2], own[..., 3]
+    e, psi, u, v = own[..., CROSS_TRACK], own[..., HEADING], own[..., SURGE], own[..., SWAY]
     metric = 1.0 - own[..., CURVATURE] * (own[..., LANE_OFFSET] + e)
     x_dot_own = (u * torch.cos(psi) - v * torch.sin(psi)) / metric
-    predicted = slots[..., 1] - (x_dot_own.unsqueeze(-1) - slots[..., 2]) * slots[..., 3]
-    slots = torch.cat([slots[..., :1], predicted.unsqueeze(-1), slots[..., 2:]], dim=-1) / slot_scale
+    predicted = slots[..., COORDINATION] - (x_dot_own.unsqueeze(-1) - slots[..., VELOCITY]) * slots[..., AGE]
+    slots = torch.cat([slots[..., :COORDINATION], predicted.unsqueeze(-1), slots[..., COORDINATION + 1 :]], dim=-1)
+    slots = slots / slot_scale
     bent = own[..., CURVATURE : CURVATURE + 1] * own[..., LANE_OFFSET : LANE_OFFSET + 1]  # κ·D_y, not D_y
     own = torch.cat([own[..., :LANE_OFFSET], bent, own[..., LANE_OFFSET + 1 :]], dim=-1) / own_scale
     return own, slots
 
 
 class PredictedInputs(nn.Module):
-    """``predicted_inputs`` as a module ``(..., dim) → (..., dim)``: the own inputs, then the slots, flat.
+    """``baselines.pretrained.predicted_inputs`` as a module ``(..., dim) → (..., dim)``: own inputs, then slots.
 
     The scales are buffers (saved with the network, never trained).
     """
@@ -99,7 +109,7 @@ class PredictedInputs(nn.Module):
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
+        own, slots = own_and_slots(observations, self.own_scale, self.slot_scale)
         return torch.cat([own, slots.flatten(-2)], dim=-1)
 
 

@@ -56,7 +56,7 @@ from torch import nn
 
 from baselines.pretrained import AGREEMENT_MASK, OWN_SCALE, SLOT_SCALE
 from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
-from training.inputs import predicted_inputs
+from training.inputs import own_and_slots
 
 __all__ = ["SlotFeatures"]
 
@@ -90,7 +90,7 @@ class SlotFeatures(BaseFeaturesExtractor):
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
-        own, slots = predicted_inputs(observations, self.own_scale, self.slot_scale)
+        own, slots = own_and_slots(observations, self.own_scale, self.slot_scale)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))
