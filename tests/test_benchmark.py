@@ -131,8 +131,8 @@ def test_training_throughput_trains_torchrl_on_the_benchmark_reward_not_the_conf
     pytest.importorskip("torch")
     from benchmarks.training_throughput import _command
     from marine_formation_env.scenarios import make_config
-    from training.config import add_run_arguments, config_from_arguments
-    from training.torchrl_ppo import resolve, training_env_kwargs
+    from training.config import add_run_arguments, config_from_arguments, training_env_kwargs
+    from training.torchrl_config import resolve
 
     def learner_reward(argv):
         parser = argparse.ArgumentParser()

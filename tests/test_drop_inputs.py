@@ -20,7 +20,7 @@ pytest.importorskip("torchrl")
 
 from training.export import export_run  # noqa: E402
 from training.inputs import InputMask, dropped_mask  # noqa: E402
-from training.torchrl_ppo import load_torch_policy  # noqa: E402
+from training.torchrl_networks import load_torch_policy  # noqa: E402
 from training.torchrl_ppo import main as torchrl_main  # noqa: E402
 
 pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)

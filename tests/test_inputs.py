@@ -90,7 +90,7 @@ def test_an_exported_run_with_predicted_inputs_acts_as_its_torchrl_policy(tmp_pa
     pytest.importorskip("torchrl")
     from training.export import export_run
     from training.inputs import PredictedInputs
-    from training.torchrl_ppo import load_torch_policy
+    from training.torchrl_networks import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main
 
     run = tmp_path / "run"

@@ -191,7 +191,7 @@ def test_an_exported_sb3_run_acts_as_sb3_s_deterministic_policy(tmp_path):
 def test_an_exported_torchrl_run_acts_as_torchrl_s_deterministic_policy(tmp_path, distribution, scale, action_scale):
     pytest.importorskip("torchrl")
     from training.export import export_run
-    from training.torchrl_ppo import load_torch_policy
+    from training.torchrl_networks import load_torch_policy
     from training.torchrl_ppo import main as torchrl_main
 
     run = tmp_path / "run"

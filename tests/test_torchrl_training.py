@@ -31,7 +31,9 @@ from marine_formation_env.scenarios import make_config  # noqa: E402
 from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
 from training.config import load_config  # noqa: E402
 from training.learned import load_learned_policy  # noqa: E402
-from training.torchrl_ppo import RewardScaler, load_torch_policy, main, resolve, running_norm  # noqa: E402
+from training.torchrl_config import resolve  # noqa: E402
+from training.torchrl_networks import load_torch_policy, running_norm  # noqa: E402
+from training.torchrl_ppo import RewardScaler, main  # noqa: E402
 
 pytestmark = pytest.mark.backend_independent  # runs the env on either backend alike (test_backends.py)
 

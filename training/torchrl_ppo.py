@@ -31,36 +31,20 @@ import numpy as np
 
 from marine_formation_env.atomic import atomic_write_bytes
 from marine_formation_env.cli import ArgumentParser, report_error
-from training.config import add_run_arguments, config_from_arguments, training_env_kwargs
+from training.config import add_run_arguments, config_from_arguments
 from training.run_folder import PROGRESS_FILE, write_config, write_progress
-from training.torchrl_config import DEFAULTS, budget_used, initial_spread, learner_env_kwargs, learning_rate, resolve
+from training.torchrl_config import initial_spread, learner_env_kwargs, learning_rate, resolve
 from training.torchrl_networks import (
     POLICY_FILE,
-    TorchPolicy,
     actor_options,
     critic_network,
     load_torch_policy,
-    load_torchrl_run,
     policy_network,
     running_norm,
     update_norm,
 )
 
-__all__ = [
-    "DEFAULTS",
-    "EpisodeReturns",
-    "RewardScaler",
-    "TorchPolicy",
-    "budget_used",
-    "learning_rate",
-    "load_torch_policy",
-    "load_torchrl_run",
-    "main",
-    "make_collector",
-    "resolve",
-    "train",
-    "training_env_kwargs",
-]
+__all__ = ["EpisodeReturns", "RewardScaler", "main", "make_collector", "train"]
 
 #: The trainer's own columns of ``progress.csv``, after ``training.run_folder.PROGRESS_COLUMNS``.
 PROGRESS_OWN_COLUMNS = ("frames", "mean_reward", "learning_rate", "kl", "updates", "initial_spread")
