@@ -7,10 +7,8 @@ Example::
 Trains PPO (``training/configs/paper_<level>_ppo.yaml``: the paper's scenario
 with randomized initial states) until the wall-clock budget is spent, then
 runs the learned policy, the reference policy and a uniform random policy on
-the same ``--episodes`` seeds, ``baselines.seeds.development_seeds`` (1 000 000,
-1 000 001, …, the seeds of the evaluations during training;
-``benchmarks.learned_baselines`` evaluates on ``evaluation_seeds``, 10 000, 10 001, …,
-so the two report different returns for the same policy), and reports:
+the same ``--episodes`` seeds, the evaluation seeds (``baselines.seeds``:
+10 000, 10 001, …, as every tool that reports a number), and reports:
 
 * mean ± std of the episode return (≤ 0; 0 is perfect) for each policy;
 * ``performance = R_reference / R_learned``: the fraction of the reference's
@@ -26,7 +24,7 @@ so the two report different returns for the same policy), and reports:
 
 Results go to ``<out>/benchmark.json``; the run folder holds the model, so
 ``python -m baselines.evaluate --policy reference --policy <out>/model.zip
---episodes 10 --seed 1000000`` (with the config's scenario and ``env_kwargs``
+--episodes 10 --seed 10000`` (with the config's scenario and ``env_kwargs``
 as ``--scenario``/``--set``) reproduces the comparison. Over a non-ideal channel (``--config
 training/configs/acoustic_speed_ppo.yaml``) the reference that extrapolates
 stale messages (``reference_extrapolate``) is evaluated too; ``performance``
@@ -46,7 +44,7 @@ from typing import Any
 from baselines.metrics import summarize
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
-from baselines.seeds import development_seeds
+from baselines.seeds import evaluation_seeds
 from marine_formation_env import ACTION_LEVELS
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides, report_error
 from marine_formation_env.env import parallel_env
@@ -124,7 +122,7 @@ def run_benchmark(
     }
     if not env.config.ideal_observations:  # stale data: also the reference that extrapolates them
         policies["reference_extrapolate"] = ReferencePolicy(env, extrapolate=True)
-    seeds = development_seeds(episodes)
+    seeds = evaluation_seeds(episodes)
     summaries = {name: summarize(evaluate_policy_episodes(env, p, seeds)) for name, p in policies.items()}
     r = {name: s["return"]["mean"] for name, s in summaries.items()}
     spread = {name: s["final_coordination_spread"]["mean"] for name, s in summaries.items()}
