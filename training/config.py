@@ -82,6 +82,7 @@ __all__ = [
     "algo_class",
     "apply_overrides",
     "check_curriculum",
+    "check_ppo_keys",
     "check_renamed",
     "check_train_reward",
     "config_differences",
@@ -513,6 +514,16 @@ def _non_negative(key: str, value: Any) -> float:
     if number < 0:
         raise TrainConfigError(f"{key} must be ≥ 0, got {value!r}")
     return number
+
+
+def check_ppo_keys(cfg: dict[str, Any]) -> None:
+    """Check, in place, the PPO keys the TorchRL and RLlib trainers share with SB3 and mean alike:
+    ``clip_range`` and ``max_grad_norm`` > 0, ``gamma`` and ``gae_lambda`` in [0, 1], ``ent_coef`` ≥ 0."""
+    for key in ("clip_range", "max_grad_norm"):
+        cfg[key] = _positive(key, cfg[key])
+    for key in ("gamma", "gae_lambda"):
+        cfg[key] = _fraction(key, cfg[key])
+    cfg["ent_coef"] = _non_negative("ent_coef", cfg["ent_coef"])
 
 
 def _hidden(value: Any) -> list[int]:

@@ -71,13 +71,12 @@ from marine_formation_env.scenarios import make_config
 from training.config import (
     RENAMED_KEYS,
     TrainConfigError,
-    _fraction,
     _hidden,
-    _non_negative,
     _number,
     _positive,
     _whole,
     add_run_arguments,
+    check_ppo_keys,
     check_renamed,
     config_from_arguments,
 )
@@ -150,11 +149,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         cfg["iterations"] = _whole("iterations", cfg["iterations"], 1)
     if cfg["minutes"] is not None:
         cfg["minutes"] = _positive("minutes", cfg["minutes"])
-    for key in ("learning_rate", "clip_range", "max_grad_norm"):
-        cfg[key] = _positive(key, cfg[key])
-    for key in ("gamma", "gae_lambda"):
-        cfg[key] = _fraction(key, cfg[key])
-    cfg["ent_coef"] = _non_negative("ent_coef", cfg["ent_coef"])
+    cfg["learning_rate"] = _positive("learning_rate", cfg["learning_rate"])
+    check_ppo_keys(cfg)
     cfg["hidden"] = _hidden(cfg["hidden"])
     resources = cfg["env_runner_resources"]
     if not isinstance(resources, dict) or not all(

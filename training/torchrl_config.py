@@ -13,13 +13,12 @@ import numpy as np
 
 from training.config import (
     TrainConfigError,
-    _fraction,
     _hidden,
-    _non_negative,
     _positive,
     _whole,
     budget_fraction,
     check_curriculum,
+    check_ppo_keys,
     check_renamed,
     check_train_reward,
     curriculum_spread,
@@ -99,11 +98,8 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         parse_schedule(cfg["learning_rate"])
     else:
         cfg["learning_rate"] = _positive("learning_rate", cfg["learning_rate"])
-    for key in ("max_grad_norm", "clip_range", "initial_scale"):
-        cfg[key] = _positive(key, cfg[key])
-    for key in ("gamma", "gae_lambda"):
-        cfg[key] = _fraction(key, cfg[key])
-    cfg["ent_coef"] = _non_negative("ent_coef", cfg["ent_coef"])
+    check_ppo_keys(cfg)
+    cfg["initial_scale"] = _positive("initial_scale", cfg["initial_scale"])
     for key in ("normalize_observations", "normalize_advantage", "normalize_reward"):
         if not isinstance(cfg[key], bool):
             raise TrainConfigError(f"{key} must be true or false, got {cfg[key]!r}")
