@@ -24,12 +24,13 @@ pytest.importorskip("torchrl")
 from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
+import training.torchrl_config as torchrl_config  # noqa: E402
 import training.torchrl_networks as networks  # noqa: E402
 import training.torchrl_ppo as trainer  # noqa: E402
 from marine_formation_env import ENV_ID  # noqa: E402
 from marine_formation_env.scenarios import make_config  # noqa: E402
 from marine_formation_env.settings import TRACKING_TERMS  # noqa: E402
-from training.config import load_config  # noqa: E402
+from training.config import load_config, training_env_kwargs  # noqa: E402
 from training.learned import load_learned_policy  # noqa: E402
 from training.torchrl_config import resolve  # noqa: E402
 from training.torchrl_networks import load_torch_policy, running_norm  # noqa: E402
@@ -235,7 +236,7 @@ def test_train_reward_shapes_only_what_the_learner_sees(tmp_path):
     assert summary["learned_return"] < 0 and summary["reference_return"] < 0
     _, config = load_torch_policy(out)
     assert "reward" not in config["env_kwargs"] and config["train_reward"]["coordination"] == 0.0
-    assert trainer.training_env_kwargs(config)["reward"]["speed"] == 0.0
+    assert training_env_kwargs(config)["reward"]["speed"] == 0.0
 
 
 def test_a_used_run_folder_needs_overwrite(tmp_path, capsys):
@@ -291,13 +292,13 @@ def test_a_run_saves_its_policy_and_progress_during_training_not_only_at_the_end
 
 def test_the_linear_schedule_falls_to_zero_over_whichever_budget_runs_out_first():
     cfg = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000, "minutes": 10}, seed=0)
-    assert trainer.learning_rate(cfg, 0.0, 0) == 1e-3
-    assert trainer.learning_rate(cfg, 150.0, 100) == pytest.approx(0.75e-3)  # a quarter of the 600 s used
-    assert trainer.learning_rate(cfg, 60.0, 500) == pytest.approx(0.5e-3)  # half of the frames used
-    assert trainer.learning_rate(cfg, 900.0, 0) == 0.0  # past the budget: floored, never negative
+    assert torchrl_config.learning_rate(cfg, 0.0, 0) == 1e-3
+    assert torchrl_config.learning_rate(cfg, 150.0, 100) == pytest.approx(0.75e-3)  # a quarter of the 600 s used
+    assert torchrl_config.learning_rate(cfg, 60.0, 500) == pytest.approx(0.5e-3)  # half of the frames used
+    assert torchrl_config.learning_rate(cfg, 900.0, 0) == 0.0  # past the budget: floored, never negative
     frames_only = resolve({"learning_rate": "lin_1e-3", "total_frames": 1000}, seed=0)
-    assert trainer.learning_rate(frames_only, 1e6, 250) == pytest.approx(0.75e-3)
-    assert trainer.learning_rate(resolve({"learning_rate": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant by default
+    assert torchrl_config.learning_rate(frames_only, 1e6, 250) == pytest.approx(0.75e-3)
+    assert torchrl_config.learning_rate(resolve({"learning_rate": 1e-3}, seed=0), 1e6, 10**9) == 1e-3  # constant
 
 
 def test_the_linear_schedule_and_the_kl_stop_are_applied_and_logged(tmp_path):
@@ -336,8 +337,8 @@ def test_train_dt_is_the_learner_s_control_period_and_the_evaluation_keeps_the_s
         assert summary["reference_return"] < 0
     assert counts == {"own": [12, 12], "coarse": [60, 60]}  # the log counts each of the 3 vessels' episodes
     cfg = resolve({"train_dt": 0.5, "env_kwargs": {"action_level": "force"}}, seed=0)
-    assert trainer.learner_env_kwargs(cfg)["dt"] == 0.5 and "dt" not in cfg["env_kwargs"]
-    assert "dt" not in trainer.learner_env_kwargs(resolve({}, seed=0))
+    assert torchrl_config.learner_env_kwargs(cfg)["dt"] == 0.5 and "dt" not in cfg["env_kwargs"]
+    assert "dt" not in torchrl_config.learner_env_kwargs(resolve({}, seed=0))
 
 
 def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp_path, monkeypatch):
@@ -354,9 +355,9 @@ def test_the_initial_state_curriculum_reaches_the_training_env_and_is_logged(tmp
     rows = (out / "progress.csv").read_text().splitlines()[1:]
     assert [float(row.split(",")[9]) for row in rows] == pytest.approx([0.6, 1.0])
     cfg = resolve({"total_frames": 1000, "initial_state_curriculum": {"start": 0.0, "until": 0.5}}, seed=0)
-    assert trainer.initial_spread(cfg, 0.0, 100) == pytest.approx(0.2)  # 10 % of the budget of 50 %
-    assert trainer.initial_spread(cfg, 0.0, 800) == 1.0  # the scenario's from half the budget on
-    assert trainer.initial_spread(resolve({}, seed=0), 0.0, 0) == 1.0  # no curriculum: the scenario's
+    assert torchrl_config.initial_spread(cfg, 0.0, 100) == pytest.approx(0.2)  # 10 % of the budget of 50 %
+    assert torchrl_config.initial_spread(cfg, 0.0, 800) == 1.0  # the scenario's from half the budget on
+    assert torchrl_config.initial_spread(resolve({}, seed=0), 0.0, 0) == 1.0  # no curriculum: the scenario's
 
 
 @pytest.mark.parametrize("distribution", ["normal", "tanh_normal"])
