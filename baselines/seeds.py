@@ -11,6 +11,10 @@ episodes.
   training (learning curves, keeping the best model) and tuning. They never
   overlap the evaluation seeds, so selecting a model on them does not select
   it on the episodes it is reported on.
+* **Benchmark** seeds ``BENCHMARK_SEED + k``: reserved for the benchmark's
+  evaluations (``docs/benchmark.md``) and its generalization track. No
+  tuning, probe or development run uses them: the evaluation seeds above
+  served the tuned rows' recipes while they were being chosen, these did not.
 
 Training seeds (``--seed``) seed the learner and its environments; an
 environment reset with seed ``s`` draws its initial state from ``s``.
@@ -18,12 +22,21 @@ environment reset with seed ``s`` draws its initial state from ``s``.
 
 from __future__ import annotations
 
-__all__ = ["DEVELOPMENT_SEED", "EVALUATION_SEED", "development_seeds", "evaluation_seeds"]
+__all__ = [
+    "BENCHMARK_SEED",
+    "DEVELOPMENT_SEED",
+    "EVALUATION_SEED",
+    "benchmark_seeds",
+    "development_seeds",
+    "evaluation_seeds",
+]
 
 #: First seed of the evaluation range.
 EVALUATION_SEED = 10_000
 #: First seed of the development range (disjoint from the evaluation range for any practical episode count).
 DEVELOPMENT_SEED = 1_000_000
+#: First seed of the benchmark's reserved range.
+BENCHMARK_SEED = 500_000
 
 
 def _seeds(first: int, episodes: int) -> list[int]:
@@ -40,3 +53,8 @@ def evaluation_seeds(episodes: int) -> list[int]:
 def development_seeds(episodes: int) -> list[int]:
     """The seeds of ``episodes`` development episodes (during training, tuning): ``DEVELOPMENT_SEED + k``."""
     return _seeds(DEVELOPMENT_SEED, episodes)
+
+
+def benchmark_seeds(episodes: int) -> list[int]:
+    """The seeds of ``episodes`` benchmark episodes, reserved for the benchmark: ``BENCHMARK_SEED + k``."""
+    return _seeds(BENCHMARK_SEED, episodes)
