@@ -10,8 +10,8 @@ machine it ran on::
      "machine": "AMD EPYC 7B13, 2 cores, Linux x86_64, Python 3.11.7", "date": "2026-12-07"}
 
 ``commit`` is ``unknown`` outside a git checkout; ``dirty`` says whether the
-checkout had uncommitted changes to tracked files (the commit alone does not
-then describe the code).
+checkout had uncommitted changes or files git neither tracks nor ignores (the
+commit alone does not then describe the code).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def commit() -> str:
 
 
 def _dirty() -> bool | None:
-    status = _git("status", "--porcelain", "--untracked-files=no")
+    status = _git("status", "--porcelain")  # untracked files too: a new module is code that ran
     return None if status is None else bool(status)
 
 
