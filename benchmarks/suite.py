@@ -34,6 +34,7 @@ import shutil
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -300,10 +301,10 @@ def aggregate(table: dict[str, np.ndarray], reps: int = 2000, seed: int = 0) -> 
     from rliable import library as rly
     from rliable import metrics
 
-    state = np.random.RandomState(seed)  # the generator rliable's (arch's) bootstrap takes
-    iqm, intervals = rly.get_interval_estimates(
-        table, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps, random_state=state
-    )
+    # rliable's stratified bootstrap draws its indices from numpy's global generator; the one for two
+    # independent samples (the probability of improvement) from arch's, given as a RandomState
+    np.random.seed(seed)  # noqa: NPY002
+    iqm, intervals = rly.get_interval_estimates(table, lambda x: np.array([metrics.aggregate_iqm(x)]), reps=reps)
     out: dict[str, Any] = {
         name: {"iqm": float(iqm[name][0]), "ci": [float(intervals[name][0, 0]), float(intervals[name][1, 0])],
                "runs": int(table[name].size)}
@@ -312,9 +313,11 @@ def aggregate(table: dict[str, np.ndarray], reps: int = 2000, seed: int = 0) -> 
     names = list(table)
     if len(names) == 2 and table[names[0]].shape == table[names[1]].shape:
         pair = {f"{names[0]},{names[1]}": (table[names[0]], table[names[1]])}
-        prob, prob_ci = rly.get_interval_estimates(
-            pair, metrics.probability_of_improvement, reps=reps, random_state=state
-        )
+        with warnings.catch_warnings():  # arch prefers a Generator to the RandomState rliable passes on
+            warnings.simplefilter("ignore", FutureWarning)
+            prob, prob_ci = rly.get_interval_estimates(
+                pair, metrics.probability_of_improvement, reps=reps, random_state=np.random.RandomState(seed)
+            )
         key = next(iter(pair))
         low, high = np.ravel(prob_ci[key])
         out["probability_of_improvement"] = {"pair": key, "value": float(np.ravel(prob[key])[0]),
@@ -401,7 +404,6 @@ def plot_report(results: dict[str, Any], table: dict[str, np.ndarray], path: Pat
             data,
             lambda s: np.array([metrics.aggregate_iqm(s[..., k]) for k in range(s.shape[-1])]),
             reps=500,
-            random_state=np.random.RandomState(0),
         )
         curves.plot(grid, iqm[name], label=name)
         curves.fill_between(grid, ci[name][0], ci[name][1], alpha=0.2)
