@@ -14,6 +14,7 @@ controller::
 
     python -m benchmarks.suite cell --task paper_speed --algorithm mappo --seed 0
     python -m benchmarks.suite table                       # every cell, resumable
+    python -m benchmarks.suite table --address HOST:PORT   # the cells as Ray tasks on a cluster
     python -m benchmarks.suite report                      # tables and figures from the results file
     python -m benchmarks.suite table --quick --out runs/suite_quick --results runs/suite_quick/results.json
 
@@ -45,6 +46,7 @@ import yaml
 
 from baselines.engine import episode_reports
 from baselines.metrics import summarize
+from baselines.ray_cluster import connect
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
 from baselines.seeds import benchmark_seeds
@@ -233,10 +235,13 @@ def run_table(
     *,
     episodes: int = EPISODES,
     quick: bool = False,
+    address: str | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Run the cells the results file does not hold yet, adding each to it as it finishes; returns the file's
-    contents. Each task's reference and random policy are evaluated once (kept in the file)."""
+    contents. Each task's reference and random policy are evaluated once (kept in the file). With ``address``
+    the cells run as Ray tasks on that cluster (``baselines.ray_cluster.connect``), one CPU each, and this
+    process writes the results file as they finish."""
     results = _read_results(results_path)
     for name in sorted({cell.task for cell in cells}):
         if name not in results["tasks"]:
@@ -254,8 +259,16 @@ def run_table(
         if bar is not None:
             bar.update(1)
 
-    for cell in todo:
-        finished(run_cell(cell, out, episodes, quick))
+    if address is None:
+        for cell in todo:
+            finished(run_cell(cell, out, episodes, quick))
+    else:
+        ray = connect(address)
+        remote = ray.remote(num_cpus=1)(run_cell)
+        pending = [remote.remote(cell, out, episodes, quick) for cell in todo]
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            finished(ray.get(ready[0]))
     if bar is not None:
         bar.close()
     return results
@@ -445,6 +458,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             p.add_argument("--tasks", default=",".join(TASKS), help="comma-separated (default every task)")
             p.add_argument("--algorithms", default=",".join(ALGORITHMS), help="comma-separated (default both)")
             p.add_argument("--seeds", default=",".join(map(str, SEEDS)), help="training seeds (default 0-4)")
+            p.add_argument("--address", default=None, help="a Ray cluster (HOST:PORT, auto or local): cells as tasks")
         p.add_argument("--out", type=Path, default=Path("runs/suite"), help="the cells' run folders")
         p.add_argument("--results", type=Path, default=RESULTS, help="the results file (added to, never replaced)")
         p.add_argument("--episodes", type=int_at_least(1), default=EPISODES, help="scoring episodes per policy")
@@ -473,7 +487,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             cells = _cells(_names(quick_tasks, list(TASKS), "--tasks"),
                            _names(args.algorithms, ALGORITHMS, "--algorithms"), parse_seeds(args.seeds))  # fmt: skip
         run_table(cells, args.out, args.results, command, episodes=args.episodes, quick=args.quick,
-                  progress=not args.quiet)  # fmt: skip
+                  address=getattr(args, "address", None), progress=not args.quiet)  # fmt: skip
     except (ValueError, RuntimeError, ImportError, ConnectionError) as err:
         parser.error(str(err))
     return 0

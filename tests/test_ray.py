@@ -11,10 +11,12 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("ray.rllib")
 
+import benchmarks.suite as suite
 from baselines.sweep import main as sweep_main
 from tests.isolated import run_isolated
 from training.config import TrainConfigError, load_config
@@ -39,6 +41,28 @@ def test_sweep_on_ray_gives_the_report_of_the_local_run(tmp_path):
     assert remote == here
     assert on_ray.with_suffix(".md").read_text() == local.with_suffix(".md").read_text()
     assert on_ray.with_suffix(".png").stat().st_size > 0
+
+
+def test_the_benchmark_s_cells_on_ray_score_as_the_local_run(tmp_path):
+    pytest.importorskip("torchrl")
+    argv = ["table", "--quick", "--tasks", "paper_speed", "--algorithms", "mappo", "--seeds", "0", "--episodes", "2"]
+    assert (
+        suite.main([*argv, "--out", str(tmp_path / "local"), "--results", str(tmp_path / "local.json"), "--quiet"]) == 0
+    )
+    remote = " ".join([*argv, "--out", str(tmp_path / "ray"), "--results", str(tmp_path / "ray.json"), "--quiet"])
+    done = run_isolated(f"$PYTHON -m benchmarks.suite {remote} --address local", timeout=300, cwd=str(ROOT))
+    assert done.returncode == 0, done.stderr[-3000:]
+    here, there = (json.loads((tmp_path / name).read_text()) for name in ("local.json", "ray.json"))
+    assert here["tasks"] == there["tasks"]  # the reference and random policy, evaluated by the driver
+    cell, far = here["cells"]["paper_speed/mappo/seed_0"], there["cells"]["paper_speed/mappo/seed_0"]
+    assert far["provenance"]["command"].endswith("--address local")
+    # seeded training in a process of its own: the same policy, up to the order in which a Ray worker's math
+    # libraries sum in float32 (measured: returns agree to 4e-10 relative)
+    for key in ("return", "final_spread", "final_cross_track", "action_change"):
+        assert far["learned"][key] == pytest.approx(cell["learned"][key], rel=1e-6), key
+    assert far["learned"]["success"] == cell["learned"]["success"]
+    assert far["curve"]["formation_steps"] == cell["curve"]["formation_steps"]
+    np.testing.assert_allclose(far["curve"]["return"], cell["curve"]["return"], rtol=1e-6)
 
 
 def test_sweep_without_a_cluster_at_the_address_says_so(tmp_path, capsys):
