@@ -1,12 +1,15 @@
 """The learning benchmark: tasks × algorithms × training seeds, scored on reserved seeds (``docs/benchmark.md``).
 
-A **cell** is one ``(task, algorithm, seed)``: ``training.torchrl_ppo`` trains
-the algorithm's one configuration (``training/configs/benchmark/ALGO.yaml``,
-the same for every task) on the task's scenario (the BenchMARL task config of
-the same name, ``marine_formation_env/benchmarl_conf``) for the task's budget
-in formation-steps, in a subprocess; then the policy acts deterministically on
-the reserved benchmark seeds (``baselines.seeds.benchmark_seeds``), in the
-benchmark's reward. Each task's reference (the paper's controller; the
+A **cell** is one ``(task, algorithm, seed)``: BenchMARL's experiment runner
+trains its implementation of the algorithm with the benchmark's one
+configuration of it (``training/configs/benchmark/``: ``ALGO.yaml``,
+``mlp.yaml`` and ``experiment.yaml``, the same for every task) on the BenchMARL
+task of that name (``marine_formation_env.benchmarl``) for the task's budget in
+formation-steps, in a subprocess (``python -m benchmarks.suite train``); then
+the policy acts deterministically on the reserved benchmark seeds
+(``baselines.seeds.benchmark_seeds``), in the benchmark's reward. BenchMARL
+needs the ecosystem environment (``pip install -c constraints-ecosystem.txt -e
+".[marl,dev]"``). Each task's reference (the paper's controller; the
 extrapolating one over lossy links) and random policy are evaluated once on the
 same seeds, and a cell's **score** is its reference-normalized return
 ``(R − R_random) / (R_reference − R_random)``: 0 is random, 1 the paper's
@@ -55,7 +58,6 @@ from marine_formation_env.atomic import atomic_path, atomic_write_text
 from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
 from marine_formation_env.provenance import command_line, provenance
-from training.learned import load_learned_policy
 
 __all__ = ["ALGORITHMS", "TASKS", "Cell", "Task", "main", "normalized_score", "run_cell", "run_table"]
 
@@ -99,8 +101,10 @@ TASKS: dict[str, Task] = {
 }
 #: The algorithms: one configuration of ``training.torchrl_ppo`` each, for every task.
 ALGORITHMS = ("mappo", "ippo")
-#: What ``--quick`` changes: budgets, batches and the episode, so that a cell takes seconds.
-QUICK = {"n_envs": 8, "frames_per_batch": 256, "minibatch_size": 128, "total_frames": 512}
+#: What ``--quick`` changes in BenchMARL's experiment configuration: budgets and batches, so that a cell takes
+#: seconds (the episode is shortened too, ``QUICK_HORIZON``).
+QUICK = {"on_policy_n_envs_per_worker": 8, "on_policy_collected_frames_per_batch": 256,
+         "on_policy_minibatch_size": 128, "max_n_frames": 512}  # fmt: skip
 QUICK_HORIZON = 20.0
 QUICK_TASKS = ("paper_speed", "acoustic_speed")
 
@@ -160,55 +164,105 @@ def task_baselines(task: Task, episodes: int, quick: bool) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def _algorithm_config(algorithm: str) -> dict[str, Any]:
-    path = ALGORITHM_CONFIGS / f"{algorithm}.yaml"
-    data = yaml.safe_load(path.read_text())
-    return dict(data["MarineFormation-v1"])
-
-
 def run_cell(cell: Cell, out: Path, episodes: int = EPISODES, quick: bool = False) -> dict[str, Any]:
-    """Train one cell in a subprocess (``training.torchrl_ppo``) into ``out/TASK/ALGO/seed_S`` and score it.
+    """Train and score one cell in a subprocess (``python -m benchmarks.suite train``) in ``out/TASK/ALGO/seed_S``.
 
-    A run folder left by a killed cell is replaced. Returns the cell's record (module docstring).
+    A run folder left by a killed cell is replaced. Returns the cell's record (``train_cell``).
     """
-    task = TASKS[cell.task]
-    scenario, overrides = _env_kwargs(task, quick)
-    config = {**_algorithm_config(cell.algorithm), "scenario": scenario, "env_kwargs": overrides}
-    config.update({"total_frames": task.budget, "minutes": None, "eval_episodes": 1})
-    if quick:
-        config.update(QUICK)
     folder = out / cell.key
     if folder.exists():
         shutil.rmtree(folder)
     folder.mkdir(parents=True)
-    config_path = folder.parent / f"seed_{cell.seed}.yaml"
-    atomic_write_text(config_path, yaml.safe_dump({"MarineFormation-v1": config}, sort_keys=False))
-    command = [sys.executable, "-m", "training.torchrl_ppo", "--config", str(config_path), "--seed", str(cell.seed),
-               "--out", str(folder), "--overwrite", "--no-progress"]  # fmt: skip
-    begin = time.perf_counter()
+    command = [sys.executable, "-m", "benchmarks.suite", "train", "--task", cell.task, "--algorithm",
+               cell.algorithm, "--seed", str(cell.seed), "--out", str(folder), "--episodes", str(episodes)]  # fmt: skip
+    if quick:
+        command.append("--quick")
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, check=False)
-    wall = time.perf_counter() - begin
     if done.returncode != 0:
         tail = done.stderr.strip().splitlines()[-1:] or [f"exit {done.returncode}"]
         raise RuntimeError(f"cell {cell.key} failed: {tail[0]}")
-    policy, _ = load_learned_policy(folder)
-    record = {"task": cell.task, "algorithm": cell.algorithm, "seed": cell.seed, "formation_steps": config[
-        "total_frames"], "wall_time_s": wall, "learned": _evaluate(policy, scenario, overrides, episodes)}  # fmt: skip
-    record["curve"] = _curve(folder)
+    return dict(json.loads((folder / "result.json").read_text()))
+
+
+try:
+    from benchmarl.experiment.callback import Callback
+except ImportError:  # BenchMARL lives in the ecosystem environment; train_cell needs it, the rest does not
+    Callback = object  # type: ignore[assignment,misc]
+
+
+class TrainingCurve(Callback):  # type: ignore[misc,valid-type]
+    """A BenchMARL callback: after each batch, the formation-steps so far and the mean return per vessel of
+    the training episodes that ended in it (none ended: no point). At module level: BenchMARL pickles its
+    callbacks with the experiment."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.formation_steps: list[float] = []
+        self.returns: list[float] = []
+        self.frames = 0
+
+    def on_batch_collected(self, batch: Any) -> None:
+        self.frames += int(batch.numel())
+        done = batch.get(("next", "done")).squeeze(-1)
+        if bool(done.any()):
+            group = next(iter(self.experiment.group_map))
+            self.formation_steps.append(float(self.frames))
+            self.returns.append(float(batch.get(("next", group, "episode_reward"))[done].mean()))
+
+
+def train_cell(cell: Cell, folder: Path, episodes: int = EPISODES, quick: bool = False) -> dict[str, Any]:
+    """Train the cell with BenchMARL in this process, score it on the benchmark seeds and write
+    ``folder/result.json``: the task, algorithm, seed, formation-steps, wall time, the ``learned`` policy's
+    scores (``_evaluate``) and the training ``curve``. Returns the record."""
+    import torch
+    from benchmarl.algorithms import IppoConfig, MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models.mlp import MlpConfig
+
+    from benchmarks.benchmarl_budget import BenchMARLPolicy, task_action_dim
+    from marine_formation_env.benchmarl import MarineFormationTask
+
+    torch.set_num_threads(1)
+    task = TASKS[cell.task]
+    scenario, overrides = _env_kwargs(task, quick)
+    benchmarl_task = MarineFormationTask.__members__[cell.task.upper()].get_from_yaml()
+    benchmarl_task.config.update({"scenario": scenario, "overrides": overrides})
+    config = ExperimentConfig.get_from_yaml(str(ALGORITHM_CONFIGS / "experiment.yaml"))
+    config.max_n_frames = task.budget
+    for key, value in (QUICK if quick else {}).items():
+        setattr(config, key, value)
+    config.save_folder = str(folder)
+    algorithm = {"mappo": MappoConfig, "ippo": IppoConfig}[cell.algorithm]
+    model = MlpConfig.get_from_yaml(str(ALGORITHM_CONFIGS / "mlp.yaml"))
+    curve = TrainingCurve()
+    experiment = Experiment(
+        task=benchmarl_task,
+        algorithm_config=algorithm.get_from_yaml(str(ALGORITHM_CONFIGS / f"{cell.algorithm}.yaml")),
+        model_config=model,
+        critic_model_config=model,
+        seed=cell.seed,
+        config=config,
+        callbacks=[curve],
+    )
+    begin = time.perf_counter()
+    experiment.run()
+    wall = time.perf_counter() - begin
+    env = experiment.test_env
+    group = next(iter(experiment.group_map))
+    observation_dim = int(env.observation_spec[group, "observation"].shape[-1])
+    n_agents = len(experiment.group_map[group])
+    policy = BenchMARLPolicy(experiment.policy, group, n_agents, observation_dim, task_action_dim(env))
+    record = {
+        "task": cell.task,
+        "algorithm": cell.algorithm,
+        "seed": cell.seed,
+        "formation_steps": int(experiment.total_frames),
+        "wall_time_s": wall,
+        "learned": _evaluate(policy, scenario, overrides, episodes),
+        "curve": {"formation_steps": curve.formation_steps, "return": curve.returns},
+    }
+    atomic_write_text(folder / "result.json", json.dumps(record, indent=2, allow_nan=False) + "\n")
     return record
-
-
-def _curve(folder: Path) -> dict[str, list[float]]:
-    """The training curve: formation-steps and the mean return of the training episodes ending in each batch."""
-    import csv
-
-    steps, returns = [], []
-    with open(folder / "progress.csv", newline="") as handle:
-        for row in csv.DictReader(handle):
-            if row.get("episode_return_mean"):
-                steps.append(float(row["frames"]))
-                returns.append(float(row["episode_return_mean"]))
-    return {"formation_steps": steps, "return": returns}
 
 
 # ----------------------------------------------------------------------------- the table
@@ -245,7 +299,7 @@ def run_table(
     results = _read_results(results_path)
     for name in sorted({cell.task for cell in cells}):
         if name not in results["tasks"]:
-            budget = QUICK["total_frames"] if quick else TASKS[name].budget
+            budget = QUICK["max_n_frames"] if quick else TASKS[name].budget
             results["tasks"][name] = {"budget": budget, "episodes": episodes,
                                       **task_baselines(TASKS[name], episodes, quick)}  # fmt: skip
             _write_results(results_path, results)
@@ -464,12 +518,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.add_argument("--episodes", type=int_at_least(1), default=EPISODES, help="scoring episodes per policy")
         p.add_argument("--quick", action="store_true", help="tiny budgets and episodes: the pipeline in seconds")
         p.add_argument("--quiet", action="store_true", help="no progress bar")
+    train = sub.add_parser("train", help="train and score one cell in this process (what cell and table run)")
+    train.add_argument("--task", required=True, choices=list(TASKS))
+    train.add_argument("--algorithm", required=True, choices=list(ALGORITHMS))
+    train.add_argument("--seed", type=int_at_least(0), required=True)
+    train.add_argument("--out", type=Path, required=True, help="the cell's run folder")
+    train.add_argument("--episodes", type=int_at_least(1), default=EPISODES)
+    train.add_argument("--quick", action="store_true")
     report = sub.add_parser("report", help="tables and figures from the results file")
     report.add_argument("--results", type=Path, default=RESULTS)
     report.add_argument("--figure", type=Path, default=ROOT / "docs" / "benchmark.png")
     args = parser.parse_args(argv)
     command = command_line(prog, argv)
     try:
+        if args.command == "train":
+            train_cell(Cell(args.task, args.algorithm, args.seed), args.out, args.episodes, args.quick)
+            return 0
         if args.command == "report":
             results = _read_results(args.results)
             if not results["cells"]:

@@ -44,7 +44,7 @@ def test_sweep_on_ray_gives_the_report_of_the_local_run(tmp_path):
 
 
 def test_the_benchmark_s_cells_on_ray_score_as_the_local_run(tmp_path):
-    pytest.importorskip("torchrl")
+    pytest.importorskip("benchmarl")
     argv = ["table", "--quick", "--tasks", "paper_speed", "--algorithms", "mappo", "--seeds", "0", "--episodes", "2"]
     assert (
         suite.main([*argv, "--out", str(tmp_path / "local"), "--results", str(tmp_path / "local.json"), "--quiet"]) == 0
