@@ -133,13 +133,13 @@ def level_settings(
                     out.append(
                         Setting(label, preset, {**noise, "n_vessels": n, "topology": topology, **overrides}, level)
                     )
-    if unbuildable is not None:  # a team the preset cannot hold (a path too tight for its lanes): listed, not run
-        for s in list(out):
-            try:
-                s.env().close()
-            except ValueError as err:
+    for s in list(out):  # a team the preset cannot hold (a path too tight for its lanes): listed, not run
+        try:
+            s.env().close()
+        except ValueError as err:
+            if unbuildable is not None:
                 unbuildable.append({"label": s.label, "level": level, "reason": str(err)})
-                out.remove(s)
+            out.remove(s)
     seen = {_config_key(s.env()): s for s in out}
     for info in of_level:
         kwargs = {k: v for k, v in info.env_kwargs.items() if k != "action_level"}
