@@ -177,6 +177,7 @@ def run_episode(
         env: a ParallelEnv of this package (its configuration and backend are used).
         policy: has ``act(observations)`` or ``act_batch``; optionally
             ``commands`` and ``reset()`` (see ``baselines.engine``).
-        seed, options: the reset seed and options.
+        seed: the reset seed.
+        options: the reset options.
     """
     return evaluate_episodes(policy, env.config, [seed], options=options, backend=env.core.backend)[0]

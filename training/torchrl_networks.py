@@ -110,7 +110,7 @@ def policy_network(
     inputs: str = "raw",
     dropped: Sequence[str] = (),
 ) -> Any:
-    """The shared actor: [input mask →] [input map or running norm →] ``MultiAgentMLP`` (shared) → loc, scale → the
+    """The shared actor: (input mask →) (input map or running norm →) ``MultiAgentMLP`` (shared) → loc, scale → the
     distribution.
 
     The scale is a biased softplus of the network's output, equal to ``initial_scale`` where that output is 0
@@ -226,7 +226,7 @@ def critic_network(
     normalize: bool = False,
     inputs: str = "raw",
 ) -> Any:
-    """The critic: [input map or running norm →] ``MultiAgentMLP`` (shared; ``centralized``: every vessel's
+    """The critic: (input map or running norm →) ``MultiAgentMLP`` (shared; ``centralized``: every vessel's
     observation, MAPPO) → one value per vessel."""
     from tensordict.nn import TensorDictModule
     from torch import nn
