@@ -296,19 +296,21 @@ def run_table(
     contents. Each task's reference and random policy are evaluated once (kept in the file). With ``address``
     the cells run as Ray tasks on that cluster (``baselines.ray_cluster.connect``), one CPU each, and this
     process writes the results file as they finish."""
+    source = provenance(command)  # the code as it is when the run starts: every cell trains with it
     results = _read_results(results_path)
     for name in sorted({cell.task for cell in cells}):
         if name not in results["tasks"]:
             budget = QUICK["max_n_frames"] if quick else TASKS[name].budget
             results["tasks"][name] = {"budget": budget, "episodes": episodes,
-                                      **task_baselines(TASKS[name], episodes, quick)}  # fmt: skip
+                                      **task_baselines(TASKS[name], episodes, quick),
+                                      "provenance": source}  # fmt: skip
             _write_results(results_path, results)
     todo = [cell for cell in cells if cell.key not in results["cells"]]
     bar = _bar(len(cells), len(cells) - len(todo), progress)
 
     def finished(record: dict[str, Any]) -> None:
         key = Cell(record["task"], record["algorithm"], record["seed"]).key
-        results["cells"][key] = {**record, "provenance": provenance(command)}
+        results["cells"][key] = {**record, "provenance": source}
         _write_results(results_path, results)
         if bar is not None:
             bar.update(1)
