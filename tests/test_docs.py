@@ -59,7 +59,7 @@ def test_every_result_file_says_which_commit_command_and_machine_it_comes_from(p
     report = json.loads(path.read_text())
     if "rows" in report:  # the learned-baselines table: a row each
         sources = [row["provenance"] for row in report["rows"]]
-    elif "cells" in report:  # the benchmark's results: each task's baselines and each cell
+    elif "tasks" in report:  # the benchmark's results: each task's baselines and each cell
         sources = [entry["provenance"] for part in ("tasks", "cells") for entry in report[part].values()]
     else:
         sources = [report["provenance"]]

@@ -107,7 +107,7 @@ def test_the_table_resumes_finished_cells_are_kept_and_a_killed_one_is_trained_a
     def no_training(*args, **kwargs):
         raise AssertionError("a finished cell was trained again")
 
-    monkeypatch.setattr(suite.subprocess, "run", no_training)
+    monkeypatch.setattr(suite, "run_cell", no_training)
     assert suite.main(argv) == 0
     assert json.loads((root / "results.json").read_text()) == before
     monkeypatch.undo()
