@@ -485,6 +485,24 @@ def plot_report(results: dict[str, Any], table: dict[str, np.ndarray], path: Pat
         fig.savefig(tmp, format="png")
 
 
+#: The markers between which ``report --document`` puts its tables.
+MARKERS = ("<!-- benchmark-results:start -->", "<!-- benchmark-results:end -->")
+
+
+def put_between_markers(document: Path, text: str) -> None:
+    """Replace what stands between ``MARKERS`` in ``document`` with ``text`` (the rest is kept).
+
+    Raises:
+        ValueError: the document lacks the markers (names the file).
+    """
+    content = document.read_text()
+    if MARKERS[0] not in content or MARKERS[1] not in content:
+        raise ValueError(f"--document {document}: no {MARKERS[0]} ... {MARKERS[1]} markers")
+    head, rest = content.split(MARKERS[0], 1)
+    _, tail = rest.split(MARKERS[1], 1)
+    atomic_write_text(document, f"{head}{MARKERS[0]}\n{text}{MARKERS[1]}{tail}")
+
+
 # ----------------------------------------------------------------------------- command line
 
 
@@ -530,6 +548,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     report = sub.add_parser("report", help="tables and figures from the results file")
     report.add_argument("--results", type=Path, default=RESULTS)
     report.add_argument("--figure", type=Path, default=ROOT / "docs" / "benchmark.png")
+    report.add_argument("--document", type=Path, default=None, help="also put the tables between its markers")
     args = parser.parse_args(argv)
     command = command_line(prog, argv)
     try:
@@ -541,8 +560,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not results["cells"]:
                 parser.error(f"--results {args.results}: no cells yet (run the table first)")
             table = scores(results)
-            print(format_report(results, aggregate(table)))
+            text = format_report(results, aggregate(table))
+            print(text)
             plot_report(results, table, args.figure)
+            if args.document is not None:
+                put_between_markers(args.document, f"`{command}`\n\n{text}\n")
             return 0
         if args.quick and args.results == RESULTS:
             parser.error("--quick writes a results file of its own: pass --results (not the shipped one)")

@@ -98,6 +98,13 @@ def test_the_report_gives_each_task_s_scores_the_aggregates_and_a_figure(quick, 
     out = capsys.readouterr().out
     assert "| `paper_speed` |" in out and "| `acoustic_speed` |" in out and "IQM of the score" in out
     assert figure.stat().st_size > 10_000
+    page = root / "page.md"
+    page.write_text("# Page\n\nbefore\n<!-- benchmark-results:start -->\nold\n<!-- benchmark-results:end -->\nafter\n")
+    args = ["report", "--results", str(root / "results.json"), "--figure", str(figure), "--document", str(page)]
+    assert suite.main(args) == 0
+    text = page.read_text()
+    assert text.startswith("# Page\n\nbefore\n") and text.endswith("after\n") and "old" not in text
+    assert "| `paper_speed` |" in text and "python -m benchmarks.suite report" in text
 
 
 def test_the_table_resumes_finished_cells_are_kept_and_a_killed_one_is_trained_again(quick, monkeypatch):
