@@ -59,7 +59,18 @@ from marine_formation_env.cli import ArgumentParser, int_at_least
 from marine_formation_env.env import parallel_env
 from marine_formation_env.provenance import command_line, provenance
 
-__all__ = ["ALGORITHMS", "TASKS", "Cell", "Task", "main", "normalized_score", "run_cell", "run_table"]
+__all__ = [
+    "ALGORITHMS",
+    "TASKS",
+    "Cell",
+    "Task",
+    "aggregate",
+    "main",
+    "normalized_score",
+    "run_cell",
+    "run_table",
+    "train_cell",
+]
 
 ROOT = Path(__file__).resolve().parents[1]
 TASK_CONFIGS = ROOT / "marine_formation_env" / "benchmarl_conf" / "task" / "marine_formation"
@@ -99,7 +110,7 @@ TASKS: dict[str, Task] = {
         Task("survey_speed", 20_000_000),
     )
 }
-#: The algorithms: one configuration of ``training.torchrl_ppo`` each, for every task.
+#: The algorithms, BenchMARL's: one configuration each (``ALGORITHM_CONFIGS``), for every task.
 ALGORITHMS = ("mappo", "ippo")
 #: What ``--quick`` changes in BenchMARL's experiment configuration: budgets and batches, so that a cell takes
 #: seconds (the episode is shortened too, ``QUICK_HORIZON``).
