@@ -53,6 +53,8 @@ def test_the_benchmark_s_cells_on_ray_score_as_the_local_run(tmp_path):
     done = run_isolated(f"$PYTHON -m benchmarks.suite {remote} --address local", timeout=300, cwd=str(ROOT))
     assert done.returncode == 0, done.stderr[-3000:]
     here, there = (json.loads((tmp_path / name).read_text()) for name in ("local.json", "ray.json"))
+    for tasks in (here["tasks"], there["tasks"]):
+        assert tasks["paper_speed"].pop("provenance")["command"].startswith("python -m benchmarks.suite table")
     assert here["tasks"] == there["tasks"]  # the reference and random policy, evaluated by the driver
     cell, far = here["cells"]["paper_speed/mappo/seed_0"], there["cells"]["paper_speed/mappo/seed_0"]
     assert far["provenance"]["command"].endswith("--address local")
