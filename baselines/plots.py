@@ -18,6 +18,9 @@ speed (1 − κ·D_yj)·u_d (thin dashed).
 
 from __future__ import annotations
 
+import json
+import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,8 +28,9 @@ import numpy as np
 
 from baselines.metrics import goal_errors, path_coordinates_along
 from baselines.rollout import Trajectory
-from marine_formation_env.atomic import atomic_path
+from marine_formation_env.atomic import atomic_path, atomic_write_text
 from marine_formation_env.dynamics import wrap_angle
+from marine_formation_env.provenance import provenance
 from marine_formation_env.render import require_matplotlib, vessel_color
 from marine_formation_env.scenarios import ScenarioConfig
 
@@ -56,6 +60,22 @@ def save_figure(fig: Any, path: str | Path) -> None:
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
+
+
+def write_report(
+    out: Path, report: dict[str, Any], markdown: str, plot: Callable[[dict[str, Any], Path], Any], command: str
+) -> None:
+    """Write a grid's report as ``out.json`` (with its ``provenance``), ``out.md`` and the figure ``out.png``.
+
+    Each file is written whole or not at all; without matplotlib the figure is left out with a message.
+    """
+    report["provenance"] = provenance(command)
+    atomic_write_text(out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))
+    atomic_write_text(out.with_suffix(".md"), markdown)
+    try:
+        plot(report, out.with_suffix(".png"))
+    except ImportError as err:
+        print(f"no figure: {err}", file=sys.stderr)
 
 
 def _path_view(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:

@@ -24,8 +24,6 @@ seed ``seed + k``: the same initial states and channel streams everywhere.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -34,12 +32,12 @@ import numpy as np
 
 from baselines.engine import episode_reports
 from baselines.evaluate import is_reference, make_policy, progress_bar
-from baselines.plots import save_figure
+from baselines.plots import save_figure, write_report
 from baselines.ray_cluster import connect
-from marine_formation_env.atomic import atomic_write_text, check_writable
+from marine_formation_env.atomic import check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
-from marine_formation_env.provenance import command_line, provenance
+from marine_formation_env.provenance import command_line
 from marine_formation_env.render import require_matplotlib
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS
 
@@ -301,13 +299,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, KeyError, TypeError, ImportError, ConnectionError) as err:
         parser.error(str(err))
     table = format_markdown(report)
-    report["provenance"] = provenance(command_line("python -m baselines.sweep", argv))
-    atomic_write_text(args.out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))
-    atomic_write_text(args.out.with_suffix(".md"), table)
-    try:
-        plot_sweep(report, args.out.with_suffix(".png"))
-    except ImportError as err:
-        print(f"no figure: {err}", file=sys.stderr)
+    write_report(args.out, report, table, plot_sweep, command_line("python -m baselines.sweep", argv))
     if not args.quiet:
         print(table)
     return 0

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,15 +46,15 @@ import numpy as np
 
 from baselines.engine import episode_reports
 from baselines.evaluate import DEFAULT_ILOS_GAIN, progress_bar
-from baselines.plots import save_figure
+from baselines.plots import save_figure, write_report
 from baselines.pretrained import PretrainedInfo, check_compatible, list_pretrained, load_pretrained
 from baselines.reference import ReferencePolicy
 from baselines.rollout import RandomPolicy
 from baselines.seeds import benchmark_seeds
-from marine_formation_env.atomic import atomic_write_text, check_writable
+from marine_formation_env.atomic import check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
 from marine_formation_env.env import parallel_env
-from marine_formation_env.provenance import command_line, provenance
+from marine_formation_env.provenance import command_line
 from marine_formation_env.render import require_matplotlib
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, SCENARIOS, ScenarioConfig
 
@@ -557,14 +556,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         report = transfer(args.policies, presets, teams, episodes, overrides, not args.quiet)
     except (ValueError, KeyError, TypeError) as err:
         parser.error(str(err))
-    report["provenance"] = provenance(command_line("python -m benchmarks.transfer", argv))
-    table = format_markdown(report)
-    atomic_write_text(args.out.with_suffix(".json"), json.dumps(report, indent=2, allow_nan=False))
-    atomic_write_text(args.out.with_suffix(".md"), table)
-    try:
-        plot_transfer(report, args.out.with_suffix(".png"))
-    except ImportError as err:
-        print(f"no figure: {err}", file=sys.stderr)
+    command = command_line("python -m benchmarks.transfer", argv)
+    write_report(args.out, report, format_markdown(report), plot_transfer, command)
     if not args.quiet:
         print(format_matrix(report))
         print()
