@@ -354,6 +354,12 @@ def _bar(total: int, done: int, progress: bool) -> Any:
 # ----------------------------------------------------------------------------- the report
 
 
+def _pm(values: Sequence[float], fmt: str = ".2f") -> str:
+    """``mean ± sample std`` of ``values`` (``± 0`` for one value)."""
+    spread = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+    return f"{np.mean(values):{fmt}} ± {spread:{fmt}}"
+
+
 def scores(results: dict[str, Any]) -> dict[str, np.ndarray]:
     """Per algorithm, the normalized scores ``(seeds, tasks)`` of the cells the results file holds: the seeds
     every task of the algorithm has, the tasks in the order of ``TASKS``."""
@@ -406,20 +412,29 @@ def aggregate(table: dict[str, np.ndarray], reps: int = 2000, seed: int = 0) -> 
 
 
 def format_report(results: dict[str, Any], summary: dict[str, Any]) -> str:
-    """The markdown tables of ``report``: per task and algorithm the score over seeds, and the aggregates."""
-    lines = ["| task | budget [formation-steps] | reference return | random return | "
-             + " | ".join(f"{a} score (seeds)" for a in ALGORITHMS) + " |",
-             "|---|---|---|---|" + "---|" * len(ALGORITHMS)]  # fmt: skip
+    """The markdown tables of ``report``: per task and algorithm the score, success and final spread over its
+    seeds (mean ± sample std), and the aggregates."""
+    lines = ["| task | budget [formation-steps] | reference return, success | random return | "
+             + " | ".join(f"{a} score (seeds) | {a} success | {a} final spread [m]" for a in ALGORITHMS) + " |",
+             "|---|---|---|---|" + "---|---|---|" * len(ALGORITHMS)]  # fmt: skip
     for name, base in results["tasks"].items():
         cells = []
         for algorithm in ALGORITHMS:
             mine = [c for c in results["cells"].values() if c["task"] == name and c["algorithm"] == algorithm]
+            if not mine:
+                cells += ["–", "–", "–"]
+                continue
             values = [normalized_score(c["learned"]["return"], base["reference"]["return"], base["random"]["return"])
                       for c in mine]  # fmt: skip
-            cells.append(f"{np.mean(values):.2f} ± {np.std(values, ddof=1) if len(values) > 1 else 0.0:.2f} "
-                         f"({len(values)})" if values else "–")  # fmt: skip
-        lines.append(f"| `{name}` | {base['budget']:.3g} | {base['reference']['return']:.1f} "
-                     f"| {base['random']['return']:.1f} | " + " | ".join(cells) + " |")  # fmt: skip
+            success = _pm([100 * c["learned"]["success"] for c in mine], ".0f")
+            cells += [
+                f"{_pm(values)} ({len(values)})",
+                f"{success} %",
+                _pm([c["learned"]["final_spread"] for c in mine], ".2g"),
+            ]
+        reference = f"{base['reference']['return']:.1f}, {base['reference']['success']:.0%}"
+        lines.append(f"| `{name}` | {base['budget']:.3g} | {reference} | {base['random']['return']:.1f} | "
+                     + " | ".join(cells) + " |")  # fmt: skip
     lines += ["", "| algorithm | IQM of the score | 95 % CI | runs |", "|---|---|---|---|"]
     for name in ALGORITHMS:
         if name in summary:
