@@ -817,7 +817,7 @@ class StepKernel:
     Everything the kernel needs that does not change between steps (the
     vessel, the gains, the level, the limits, the reward weights, the
     observation bounds and slot geometry, the channel's constants) is packed
-    at construction (the reward again by ``set_reward``); ``run``
+    at construction; ``run``
     passes the per-step arrays.
 
     With non-ideal links (``channel`` given) the same kernel also runs the
@@ -858,9 +858,16 @@ class StepKernel:
             np.array(config.current.coefficients),
         )
         self.geometry = (np.ascontiguousarray(config.formation), slot_index, slot_mask)
-        self._bounds = (obs_low, obs_high)
-        self._ends = (np.array(config.workspace), config.safety_distance, config.max_speed, config.max_yaw_rate)
-        self.set_reward(config)
+        self.config = config
+        w = config.reward  # the reward's weights, scales and terminal rate
+        self.limits = (
+            obs_low,
+            obs_high,
+            np.array([*w.tracking_weights, w.effort]),
+            np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
+        )
+        ends = (np.array(config.workspace), config.safety_distance, config.max_speed, config.max_yaw_rate)
+        self.tail = (w.terminal_rate, *ends)
         self.channel, self.sensor_noise = channel, sensor_noise
         if channel is None:  # placeholders of the same types: one compiled kernel serves both cases
             ideal = [(math.inf, np.eye(config.n_vessels))]
@@ -880,20 +887,6 @@ class StepKernel:
             rules.LOOKAHEAD,
             np.zeros((num_envs, config.n_vessels, 4)),
         )
-
-    def set_reward(self, config: Any) -> None:
-        """Run the following steps with ``config``: this kernel's scenario, its reward possibly another.
-
-        Packs the reward's weights, scales and terminal rate; nothing else of ``config`` is read again.
-        """
-        self.config = config
-        w = config.reward
-        self.limits = (
-            *self._bounds,
-            np.array([*w.tracking_weights, w.effort]),
-            np.array([*w.tracking_sigmas, *w.fine_shares, w.fine_scale]),
-        )
-        self.tail = (w.terminal_rate, *self._ends)
 
     def run(
         self,
