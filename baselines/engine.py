@@ -31,6 +31,7 @@ import numpy as np
 
 from baselines.metrics import episode_metrics
 from baselines.rollout import Trajectory
+from marine_formation_env.core import MESSAGE_KEYS
 from marine_formation_env.env import MarineFormationParallelEnv
 from marine_formation_env.frontend import reward_terms
 from marine_formation_env.scenarios import ScenarioConfig
@@ -106,6 +107,7 @@ def _rollout(
     actions = np.zeros((steps, b, n, a_dim))
     rewards = np.zeros((steps, b, n))
     components: dict[str, np.ndarray] = {}
+    messages = {key: np.zeros((steps, b, n), dtype=np.int64) for key in MESSAGE_KEYS}
     states[0], times[0] = core.state, core.time
     length = np.full(b, steps)  # control periods each episode lasted
     alive = np.ones(b, dtype=bool)
@@ -128,6 +130,8 @@ def _rollout(
         rewards[k] = rew.reshape(b, n)
         for name, value in reward_terms(infos).items():
             components.setdefault(name, np.zeros((steps, b, n)))[k] = value.reshape(b, n)
+        for key, value in messages.items():
+            value[k] = infos[key].reshape(b, n)
         if "commanded_speed" in infos:
             u_c[k] = infos["commanded_speed"].reshape(b, n)
         states[k + 1], times[k + 1] = core.state, core.time
@@ -156,6 +160,7 @@ def _rollout(
                 terminated=bool(ended["terminated"][f]),
                 truncated=bool(ended["truncated"][f]),
                 collision=bool(collision[f]),
+                messages={key: value[:t_len, f].copy() for key, value in messages.items()},
             )
         )
     return out

@@ -24,7 +24,9 @@ too). The
 reference takes options after a colon, comma-separated: ``extrapolate``
 (predict neighbours' positions from their last message's velocity and age) and
 ``ilos=σ`` (integral LOS with gain σ [m/s], ``ilos`` alone: σ = 1), e.g.
-``reference:extrapolate,ilos=1.0``. A
+``reference:extrapolate,ilos=1.0``; ``event=δ`` runs it with event-triggered
+broadcasting at threshold δ (``channel.event_threshold``) and extrapolating,
+e.g. ``reference:event=0.5``. A
 model or pretrained policy brings its training scenario and env overrides;
 ``--scenario`` and ``--set`` take precedence over them (a pretrained policy
 refuses a team size, action level or observation layout it cannot take). ``--set KEY=VALUE`` overrides any scenario
@@ -40,6 +42,7 @@ side (and each policy's own Fig. 6-style figure beside it).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import sys
@@ -76,21 +79,47 @@ def is_reference(spec: str) -> bool:
 
 
 def reference_options(spec: str) -> dict[str, Any]:
-    """Keyword arguments of ``ReferencePolicy`` from ``reference[:opt,opt=value]``."""
-    _, _, raw = spec.partition(":")
+    """Keyword arguments of ``ReferencePolicy`` from ``reference[:opt,opt=value]`` (``event=δ`` extrapolates;
+    its channel setting is ``policy_config``'s)."""
     options: dict[str, Any] = {}
+    for name, value in _reference_items(spec):
+        if name == "extrapolate" or name == "event":
+            options["extrapolate"] = True
+        elif name == "ilos":
+            options["integral_los"] = DEFAULT_ILOS_GAIN if value is None else value
+    return options
+
+
+def _reference_items(spec: str) -> list[tuple[str, float | None]]:
+    """The options of ``reference[:opt,opt=value]`` as ``(name, number or None)``, checked."""
+    _, _, raw = spec.partition(":")
+    items: list[tuple[str, float | None]] = []
     for item in filter(None, (part.strip() for part in raw.split(","))):
         name, eq, value = item.partition("=")
         if name == "extrapolate" and not eq:
-            options["extrapolate"] = True
-        elif name == "ilos":
+            items.append((name, None))
+        elif name in ("ilos", "event") and (eq or name == "ilos"):
             try:
-                options["integral_los"] = float(value) if eq else DEFAULT_ILOS_GAIN
+                items.append((name, float(value) if eq else None))
             except ValueError:
-                raise ValueError(f"policy {spec!r}: ilos=σ needs a number, got {value!r}") from None
+                symbol = "σ" if name == "ilos" else "δ"
+                raise ValueError(f"policy {spec!r}: {name}={symbol} needs a number, got {value!r}") from None
         else:
-            raise ValueError(f"policy {spec!r}: unknown reference option {item!r}; options: extrapolate, ilos[=σ]")
-    return options
+            raise ValueError(
+                f"policy {spec!r}: unknown reference option {item!r}; options: extrapolate, ilos[=σ], event=δ"
+            )
+    return items
+
+
+def policy_config(spec: str, config: ScenarioConfig) -> ScenarioConfig:
+    """The scenario ``spec`` runs in: ``config``, with event-triggered broadcasting at threshold δ for
+    ``reference:event=δ`` (``ChannelConfig.event_threshold``)."""
+    threshold = dict(_reference_items(spec)).get("event") if is_reference(spec) else None
+    if threshold is None:
+        return config
+    channel = dataclasses.replace(config.channel, event_threshold=threshold)
+    channel.validate(config.dt, config.n_vessels)
+    return dataclasses.replace(config, channel=channel)
 
 
 PRETRAINED_PREFIX = "pretrained:"
@@ -115,7 +144,7 @@ def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
 def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
     """Build a policy from its command-line name (or a loaded model)."""
     if is_reference(spec):
-        return ReferencePolicy(env, **reference_options(spec))
+        return ReferencePolicy(policy_config(spec, env.config), **reference_options(spec))
     if spec == "random":
         return RandomPolicy(env, seed=seed)
     if loaded is not None and spec in loaded:
@@ -209,7 +238,8 @@ def evaluate(
     bar = progress_bar(len(policies) * episodes, progress)
     seeds = [seed + k for k in range(episodes)]
     for label in policies:
-        per_episode, trajectories = episode_reports(make_policy(label, env, seed, loaded), cfg, seeds)
+        policy = make_policy(label, env, seed, loaded)
+        per_episode, trajectories = episode_reports(policy, policy_config(label, cfg), seeds)
         first[label] = trajectories[0]
         if bar is not None:
             bar.update(episodes)
@@ -230,6 +260,7 @@ TABLE_COLUMNS = (
     ("time_outside_speed_band", "outside band [s]", "{:.1f}"),
     ("effort", "effort", "{:.3g}"),
     ("action_change", "Δa", "{:.3g}"),
+    ("message_rate", "msg/vessel/s", "{:.3g}"),
     ("success", "success", "{:.0%}"),
 )
 
@@ -266,7 +297,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--policy",
         action="append",
         dest="policies",
-        help="policy to run; repeatable: reference[:extrapolate,ilos=σ], random, pretrained:NAME, "
+        help="policy to run; repeatable: reference[:extrapolate,ilos=σ,event=δ], random, pretrained:NAME, "
         "or a saved model .zip / run folder",
     )
     parser.add_argument("--list-pretrained", action="store_true", help="list the shipped pretrained policies and exit")

@@ -179,7 +179,9 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
     i, j = np.triu_indices(cfg.n_vessels, k=1)
     separation = np.hypot(traj.state[:, i, X] - traj.state[:, j, X], traj.state[:, i, Y] - traj.state[:, j, Y])
     settle = settling_time(traj, cfg)
-    by_entry = action_change_by_entry(traj.actions)
+    commands = traj.actions[..., : cfg.control_dim]  # without the transmit entry
+    by_entry = action_change_by_entry(commands)
+    duration = float(traj.t[-1])
     success = not traj.terminated and all(
         float(np.max(np.abs(err[key][-1]))) <= tol for key, tol in SUCCESS_BANDS.items()
     )
@@ -201,17 +203,28 @@ def episode_metrics(traj: Trajectory, cfg: ScenarioConfig) -> dict[str, Any]:
         "commanded_speed_max": float(np.nanmax(u_c)) if known.any() else None,
         "time_outside_speed_band": float(outside.sum() * cfg.dt),
         "surge_outside_band_time": _surge_outside_time(traj, cfg),
-        "effort": float(np.mean(np.square(traj.actions))) if traj.actions.size else 0.0,
+        "effort": float(np.mean(np.square(commands))) if commands.size else 0.0,
         "action_change": float(np.mean(by_entry)),
         **{
             f"action_change_{name}": float(change)
             for name, change in zip(LEVEL_COMMANDS[cfg.action_level], by_entry, strict=True)
         },
         "min_separation": float(separation.min()),
+        **_message_metrics(traj, cfg.n_vessels, duration),
         "terminated": traj.terminated,
         "collision": traj.collision,
         "success": success,
     }
+
+
+def _message_metrics(traj: Trajectory, n: int, duration: float) -> dict[str, Any]:
+    """``message_rate`` (broadcasts sent per vessel per second) and ``bit_rate`` [bit/s per vessel] over the
+    episode's steps, and each counter's total (``messages_sent``, …; ``marine_formation_env.channel``)."""
+    if not traj.messages:
+        return {}
+    totals = {key: int(value.sum()) for key, value in traj.messages.items()}
+    per = n * duration if duration > 0 else float("nan")
+    return {"message_rate": totals["messages_sent"] / per, "bit_rate": totals["bits_sent"] / per, **totals}
 
 
 def summarize(episodes: list[dict[str, Any]]) -> dict[str, dict[str, float]]:

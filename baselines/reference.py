@@ -122,6 +122,12 @@ class ReferencePolicy(BatchPolicy):
                     "integral_los needs action_level 'guidance' or 'force': at 'speed' the env's built-in LOS steers "
                     "and the policy only commands the speed (set the scenario's los_integral_gain instead)"
                 )
+        if config.transmit:
+            raise ValueError(
+                "ReferencePolicy does not send the transmit action the scenario has (transmit=True); the "
+                "paper's controller broadcasts by the channel's rule: periodic, or event-triggered with "
+                "channel.event_threshold (the policy 'reference:event=δ')"
+            )
         self.config = config
         self.layout = ObservationLayout(config.n_vessels, config.observation_slots)
         self.extrapolate = extrapolate

@@ -57,6 +57,8 @@ class Trajectory:
         actions: ``(T, n, A)`` normalized actions as the env applied them (clipped).
         rewards: ``(T, n)``; components: name → ``(T, n)``.
         terminated, truncated, collision: how the episode ended.
+        messages: the message counters of each step's control instant, info key
+            (``messages_sent``, …, ``bits_sent``) → ``(T, n)`` (empty: not recorded).
     """
 
     t: np.ndarray
@@ -69,6 +71,7 @@ class Trajectory:
     terminated: bool = False
     truncated: bool = False
     collision: bool = False
+    messages: dict[str, np.ndarray] = field(default_factory=dict)
 
     def to_npz_dict(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Arrays for ``np.savez`` (``t``, ``state``, … with an optional key prefix)."""

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from baselines.engine import episode_reports
-from baselines.evaluate import is_reference, make_policy, progress_bar
+from baselines.evaluate import is_reference, make_policy, policy_config, progress_bar
 from baselines.plots import save_figure, write_report
 from baselines.ray_cluster import connect
 from marine_formation_env.atomic import check_writable
@@ -72,6 +72,7 @@ def _cell(episodes: list[dict[str, Any]], horizon: float) -> dict[str, Any]:
         "surge_outside_band_time": float(np.mean([e["surge_outside_band_time"] for e in episodes])),
         "collision_rate": float(np.mean([e["collision"] for e in episodes])),
         "min_separation": float(np.min([e["min_separation"] for e in episodes])),
+        "message_rate": float(np.mean([e["message_rate"] for e in episodes])),
     }
 
 
@@ -150,7 +151,10 @@ def run_cell(
     env = parallel_env(scenario, **overrides)
     try:
         return {
-            label: _cell(episode_reports(make_policy(label, env, seeds[0]), env.config, seeds)[0], env.config.horizon)
+            label: _cell(
+                episode_reports(make_policy(label, env, seeds[0]), policy_config(label, env.config), seeds)[0],
+                env.config.horizon,
+            )
             for label in policies
         }
     finally:

@@ -61,6 +61,7 @@ from marine_formation_env.provenance import command_line, provenance
 
 __all__ = [
     "ALGORITHMS",
+    "COMMUNICATION_TASKS",
     "TASKS",
     "Cell",
     "Task",
@@ -110,6 +111,9 @@ TASKS: dict[str, Task] = {
         Task("survey_speed", 20_000_000),
     )
 }
+#: The BenchMARL tasks of the communication track (docs/channel.md): a learned policy there is compared with
+#: the reference tuned to the task's budget (``benchmarks.communication``), not in this table.
+COMMUNICATION_TASKS = ("paper_speed_budget", "acoustic_speed_budget")
 #: The algorithms, BenchMARL's: one configuration each (``ALGORITHM_CONFIGS``), for every task.
 ALGORITHMS = ("mappo", "ippo")
 #: What ``--quick`` changes in BenchMARL's experiment configuration: budgets and batches, so that a cell takes

@@ -77,6 +77,8 @@ for _fn in (
     rules.outside_workspace,
     rules.outside_envelope,
     channel_module.in_range,
+    channel_module.prediction_error,
+    channel_module.event_due,
 ):
     register_jitable(_fn)
 
@@ -99,7 +101,10 @@ terminal_term = rules.terminal_term
 outside_workspace = rules.outside_workspace
 outside_envelope = rules.outside_envelope
 in_range = channel_module.in_range
+prediction_error = channel_module.prediction_error
+event_due = channel_module.event_due
 NEVER = channel_module.NEVER
+NOT_SENT = channel_module.NOT_SENT
 
 
 def coefficients(config: Any) -> tuple[Any, Any]:
@@ -271,12 +276,14 @@ def _kernel(  # type: ignore[no-untyped-def]
     n_form, n = state.shape[0], state.shape[1]
     h = dt / substeps
     # the channel's arrays, unpacked once (the threads cannot share tuples of arrays)
-    (noise, c_sea, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_link, c_pending, c_bounds) = chan
+    (noise, c_sea, c_rule, c_graphs, c_ends, c_loss, c_uniforms, c_upos, c_link, c_pending, c_bounds, c_traffic) = chan
     has_noise, c_normals, c_npos, c_scale, c_measured = noise
     has_current, c_current = c_sea
     c_up, c_has, c_theta, c_xdot, c_time, c_failed, c_bad, c_tx = c_link
     c_pvalid, c_ptheta, c_pxdot, c_ptime, c_next = c_pending
     c_slots, c_low, c_high = c_bounds
+    t_rule, t_wants, t_stheta, t_sxdot, t_stime, t_sstep, t_tokens, t_counts = c_traffic
+    t_bucket = t_rule[6]
     c_with_burst, c_p_bad, c_depth = c_rule[5], c_rule[8], c_rule[15]
     for b in prange(n_form):
         if restart[b]:
@@ -438,6 +445,12 @@ def _kernel(  # type: ignore[no-untyped-def]
                     c_pvalid,
                     c_next,
                     c_bad,
+                    t_stheta,
+                    t_sxdot,
+                    t_stime,
+                    t_sstep,
+                    t_tokens,
+                    t_bucket,
                 )
             if has_noise:  # without noise the measurement is the state, whose theta, xdot the step left
                 _channel_measure(b, state, c_normals, c_npos, c_scale, c_measured, offsets, theta, xdot)
@@ -489,6 +502,14 @@ def _kernel(  # type: ignore[no-untyped-def]
                 c_next,
                 theta,
                 xdot,
+                t_rule,
+                t_wants,
+                t_stheta,
+                t_sxdot,
+                t_stime,
+                t_sstep,
+                t_tokens,
+                t_counts,
             )
             if step >= c_next[b]:  # the ring of pending messages is read only at an instant where one arrives
                 _channel_deliver(
@@ -534,11 +555,22 @@ def _channel_restart(  # type: ignore[no-untyped-def]
     pend_valid,
     next_arrival,
     bad,
+    sent_theta,
+    sent_xdot,
+    sent_time,
+    sent_step,
+    tokens,
+    bucket,
 ):
-    """``LinkChannel.reset`` for formation ``b``: no messages, every link live, Gilbert–Elliott chains stationary."""
+    """``LinkChannel.reset`` for formation ``b``: no messages, every link live, Gilbert–Elliott chains stationary,
+    nothing broadcast, full buckets."""
     n = up.shape[1]
     for j in range(n):
         transmitted[b, j] = False
+        sent_theta[b, j] = np.inf
+        sent_xdot[b, j] = sent_time[b, j] = 0.0
+        sent_step[b, j] = -NOT_SENT
+        tokens[b, j] = bucket
         for i in range(n):
             up[b, j, i] = has_message[b, j, i] = failed[b, j, i] = False
             held_theta[b, j, i] = held_xdot[b, j, i] = held_time[b, j, i] = 0.0
@@ -594,8 +626,17 @@ def _channel_send(  # type: ignore[no-untyped-def]
     next_arrival,
     theta,
     xdot,
+    traffic,
+    wants,
+    sent_theta,
+    sent_xdot,
+    sent_time,
+    sent_step,
+    tokens,
+    counts,
 ):
-    """``LinkChannel.update`` for formation ``b``: link states, transmissions, losses, delays into the ring."""
+    """``LinkChannel.update`` for formation ``b``: who broadcasts (``LinkChannel._broadcasts``), link states,
+    losses, delays into the ring, and the message counters."""
     (
         tdma,
         every,
@@ -629,13 +670,40 @@ def _channel_send(  # type: ignore[no-untyped-def]
         phase = (t + 1e-9) % ends[-1]
         while g < ends.shape[0] and ends[g] <= phase:
             g += 1
+    mode, threshold, min_steps, heartbeat_steps, with_budget, refill, bucket, bits = traffic
     draws = with_failure  # a row of uniforms only when something random happens (LinkChannel.draws_at)
     for i in range(n):
         if tdma:
-            transmitted[b, i] = step % (n * every) == i * every
+            opportunity = step % (n * every) == i * every
         else:
-            transmitted[b, i] = step % every == 0
-        draws = draws or transmitted[b, i]
+            opportunity = step % every == 0
+        if mode == 2:  # the policy decides; at reset there is no decision yet: every vessel tries
+            attempt = wants[b, i] or step == 0
+            clear = attempt and opportunity
+        elif mode == 1:  # event-triggered
+            clear = False
+            if opportunity:
+                error = prediction_error(
+                    theta[b, i], xdot[b, i], sent_theta[b, i], sent_xdot[b, i], t - sent_time[b, i]
+                )
+                clear = event_due(error, threshold, step - sent_step[b, i], min_steps, heartbeat_steps)
+            attempt = clear
+        else:
+            attempt = clear = opportunity
+        tx = clear
+        if with_budget:
+            level = bucket if step == 0 else min(tokens[b, i] + refill, bucket)
+            tx = clear and level >= bits
+            tokens[b, i] = level - bits if tx else level
+        transmitted[b, i] = tx
+        counts[b, 0, i] = 1 if attempt else 0
+        counts[b, 1, i] = 1 if tx else 0
+        counts[b, 2, i] = counts[b, 3, i] = counts[b, 4, i] = 0
+        counts[b, 5, i] = 1 if attempt and not clear else 0
+        counts[b, 6, i] = 1 if clear and not tx else 0
+        if tx:
+            sent_theta[b, i], sent_xdot[b, i], sent_time[b, i], sent_step[b, i] = theta[b, i], xdot[b, i], t, step
+        draws = draws or tx
     r = uniforms[b, upos[b]]  # not read (and not consumed) without draws
     if draws:
         upos[b] += 1
@@ -656,8 +724,11 @@ def _channel_send(  # type: ignore[no-untyped-def]
                 failed[b, j, i] = down
                 alive = alive and not down
             up[b, j, i] = alive
-            send = alive and transmitted[b, i]
-            if not send:
+            if not transmitted[b, i]:
+                continue
+            if not alive:
+                if graphs[g, j, i]:  # a link of the graph, down: out of range or failed
+                    counts[b, 4, i] += 1
                 continue
             if with_burst:
                 u_b = r[d_burst * nn + k]
@@ -667,7 +738,9 @@ def _channel_send(  # type: ignore[no-untyped-def]
             else:
                 p_loss = loss[j, i]
             if r[d_loss * nn + k] < p_loss:
+                counts[b, 3, i] += 1
                 continue
+            counts[b, 2, i] += 1
             delay_steps = 0
             if with_delay:
                 delay = latency + (jitter * r[d_jitter * nn + k] if jitter > 0 else 0.0)
@@ -1031,4 +1104,23 @@ def channel_args(
         ),
         (channel.pend_valid, channel.pend_theta, channel.pend_xdot, channel.pend_time, channel.next_arrival),
         (slot_index, obs_low, obs_high),
+        (
+            (
+                int(channel.mode),
+                float(channel.threshold),
+                int(channel.min_steps),
+                int(channel.heartbeat_steps),
+                ch.has_budget,
+                float(channel.refill),
+                float(ch.bucket),
+                float(ch.message_bits),
+            ),
+            channel.wants,
+            channel.sent_theta,
+            channel.sent_xdot,
+            channel.sent_time,
+            channel.sent_step,
+            channel.tokens,
+            channel.counts,
+        ),
     )

@@ -6,19 +6,21 @@ scenario of this project with its overrides, built as a
 ``num_envs`` formations (no PettingZoo wrapper, no Python loop over
 formations). The agent group is ``vessel``; ``state`` (every vessel's state
 and the time) feeds MAPPO's and MASAC's centralized critics; the reward terms,
-collision and out-of-bounds flags and the commanded speed are the group's
-``info`` entries, which BenchMARL logs; evaluation renders formation 0.
+collision and out-of-bounds flags, the commanded speed and the message
+counters are the group's ``info`` entries, which BenchMARL logs; evaluation renders formation 0.
 
-=================  ==========================================================
-task               scenario
-=================  ==========================================================
-``paper_speed``     the paper's scenario, speed commands (the guidance law steers)
-``paper_guidance``  the paper's scenario, speed and heading commands
-``paper_force``     the paper's scenario, surge force and yaw moment
-``acoustic_speed``  the paper's team over the lossy, delayed acoustic channel
-``ring6_speed``     six vessels on a directed ring, speed commands
-``survey_speed``    the paper's team on a lawnmower survey (docs/paths.md), speed commands
-=================  ==========================================================
+=========================  ============================================================
+task                       scenario
+=========================  ============================================================
+``paper_speed``            the paper's scenario, speed commands (the guidance law steers)
+``paper_guidance``         the paper's scenario, speed and heading commands
+``paper_force``            the paper's scenario, surge force and yaw moment
+``acoustic_speed``         the paper's team over the lossy, delayed acoustic channel
+``ring6_speed``            six vessels on a directed ring, speed commands
+``survey_speed``           the paper's team on a lawnmower survey (docs/paths.md), speed commands
+``paper_speed_budget``     ``paper_budget``: a bandwidth budget; each vessel also decides when to broadcast
+``acoustic_speed_budget``  ``acoustic_budget``: the acoustic channel with a budget; each vessel decides too
+=========================  ============================================================
 
 Install (BenchMARL 1.5 needs TorchRL 0.10–0.11, so this extra cannot share a
 virtual environment with the ``torchrl`` extra, which takes TorchRL 0.14)::
@@ -171,6 +173,8 @@ class MarineFormationTask(Task):
     ACOUSTIC_SPEED = None
     RING6_SPEED = None
     SURVEY_SPEED = None
+    PAPER_SPEED_BUDGET = None
+    ACOUSTIC_SPEED_BUDGET = None
 
     @staticmethod
     def associated_class() -> type[TaskClass]:

@@ -17,24 +17,49 @@ Timing (everything happens at the control instants ``t_k = k·dt``):
    μ per second: per control period a live link fails with probability
    ``1 − e^{−λ·dt}``, a failed one recovers with ``1 − e^{−μ·dt}``; every link
    is live at reset).
-2. **Who transmits.** Without TDMA every vessel transmits at ``t_k`` when
-   ``k`` is a multiple of ``period/dt`` (``period = None``: every control
-   period). With TDMA (``tdma_slot``) the channel carries one transmitter per
-   slot, round robin: vessel ``i`` transmits when ``k mod (n·S) = i·S`` with
-   ``S = tdma_slot/dt``, so each vessel updates every ``n·tdma_slot`` seconds.
-3. **Loss.** A message from ``i`` reaches ``j`` only if the link exists at
+2. **When a vessel may transmit** (its opportunities). Without TDMA at
+   ``t_k`` when ``k`` is a multiple of ``period/dt`` (``period = None``: every
+   control period). With TDMA (``tdma_slot``) the channel carries one
+   transmitter per slot, round robin: vessel ``i`` may transmit when
+   ``k mod (n·S) = i·S`` with ``S = tdma_slot/dt``, so every
+   ``n·tdma_slot`` seconds.
+3. **Whether it tries** (its attempts). Periodic broadcasting (the default)
+   uses every opportunity. **Event-triggered** broadcasting
+   (``event_threshold`` δ) uses an opportunity only when the prediction its
+   neighbours make of it from its last broadcast ``(θ_s, ẋ_s, t_s)``,
+   ``θ̂ = θ_s + ẋ_s·(t_k − t_s)`` and ``ẋ̂ = ẋ_s``, is off by
+   ``max(|θ − θ̂| [m], |ẋ − ẋ̂|·1 s) ≥ δ``, and at least ``min_interval``
+   τ_min after its last broadcast (no Zeno behaviour); it also uses one
+   ``heartbeat`` T_max after its last broadcast whatever the error, and its
+   first opportunity after reset. With δ = 0 and τ_min = dt this is periodic
+   broadcasting exactly. With ``ScenarioConfig.transmit`` the vessel's policy
+   decides at every control instant (the action's last entry > 0); an
+   attempt outside the vessel's opportunities is dropped (by *schedule*).
+4. **Budget.** With ``budget_rate`` each vessel has a token bucket of
+   ``budget_burst`` bits, full at reset, refilled by ``budget_rate·dt`` bits at
+   every later control instant (never above ``budget_burst``); a broadcast
+   costs ``message_bits`` bits and is not sent without them (dropped by
+   *budget*).
+5. **Loss.** A message from ``i`` reaches ``j`` only if the link exists at
    sending and survives an independent loss draw per link and message:
    Bernoulli(``loss``), or the Gilbert–Elliott chain of ``GilbertElliott``
    (one chain per link, advanced once per message sent on it).
-4. **Latency.** A message is time-stamped at sending, ``t_s = t_k``; it arrives
+6. **Latency.** A message is time-stamped at sending, ``t_s = t_k``; it arrives
    ``latency + jitter·U`` seconds later (``U ~ Uniform[0, 1)``) and is
    delivered at the first control instant at or after its arrival time, never
    before. A latency of ``m·dt`` delays it by exactly ``m`` control periods.
-5. **What is observed.** Vessel ``j`` holds, per link, the newest message
+7. **What is observed.** Vessel ``j`` holds, per link, the newest message
    received (zero-order hold; a late message never replaces a newer one). Its
    observation slot for ``i`` shows ``(link, θ_j − θ_i(t_s), ẋ_j − ẋ_i(t_s),
    t_k − t_s)`` where ``link = 1`` iff the link exists now *and* has delivered
    at least one message since reset; otherwise the slot is all zeros.
+
+Every message is counted (``COUNTERS``), per vessel and control instant:
+``attempted`` and ``sent`` broadcasts, ``dropped_schedule`` and
+``dropped_budget`` attempts, and per link of the communication graph out of a
+sent broadcast ``delivered`` (survived the link: on its way or arrived),
+``dropped_loss`` and ``dropped_range`` (the link was down: out of range or
+failed). Bits on the channel are ``sent × message_bits``.
 
 With the default ``ChannelConfig`` nothing of this runs and the
 observations are those of the ideal links; with a configuration that exists
@@ -50,6 +75,7 @@ length.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -61,11 +87,53 @@ from marine_formation_env.errors import ConfigError, build_config, check_number,
 from marine_formation_env.streams import BlockStream, channel_streams
 
 # BlockStream and channel_streams are re-exported from marine_formation_env.streams
-__all__ = ["BlockStream", "ChannelConfig", "GilbertElliott", "LinkChannel", "channel_streams", "in_range"]
+__all__ = [
+    "COUNTERS",
+    "MESSAGE_BITS",
+    "BlockStream",
+    "ChannelConfig",
+    "GilbertElliott",
+    "LinkChannel",
+    "channel_streams",
+    "event_due",
+    "in_range",
+    "prediction_error",
+]
 
 
 #: ``next_arrival`` of a formation with no message on its way.
 NEVER = np.iinfo(np.int64).max
+#: The message counters (``LinkChannel.counts``), in their order: per broadcast the first two and the last
+#: two, per link of the communication graph out of a sent broadcast the three in between.
+COUNTERS = ("attempted", "sent", "delivered", "dropped_loss", "dropped_range", "dropped_schedule", "dropped_budget")
+#: ``LinkChannel.mode``: who decides when a vessel broadcasts.
+PERIODIC, EVENT, TRANSMIT = 0, 1, 2
+ATTEMPTED, SENT, DELIVERED, LOSS, RANGE, SCHEDULE, BUDGET = range(len(COUNTERS))
+#: One message's size [bit] by default: θ, ẋ and the send time, 32 bits each.
+MESSAGE_BITS = 96
+#: Control periods since the last broadcast of a vessel that has not broadcast since reset.
+NOT_SENT = 1 << 40
+
+
+def prediction_error(theta: Any, xdot: Any, sent_theta: Any, sent_xdot: Any, elapsed: Any) -> Any:
+    """How far the neighbours' prediction of a vessel from its last broadcast is off.
+
+    The neighbours predict ``θ̂ = θ_s + ẋ_s·elapsed`` and ``ẋ̂ = ẋ_s`` from the
+    broadcast ``(θ_s, ẋ_s)`` sent ``elapsed`` seconds ago (as the extrapolating
+    reference does); the error is ``max(|θ − θ̂| [m], |ẋ − ẋ̂| [m/s]·1 s)``.
+    Scalars or arrays: the compiled channel calls this function too.
+    """
+    return np.maximum(np.abs(theta - (sent_theta + sent_xdot * elapsed)), np.abs(xdot - sent_xdot))
+
+
+def event_due(error: Any, threshold: float, since: Any, min_steps: int, heartbeat_steps: int) -> Any:
+    """Whether an event-triggered vessel uses an opportunity to broadcast.
+
+    ``since`` control periods after its last broadcast (``NOT_SENT`` before
+    the first): when the prediction ``error`` has reached ``threshold`` δ and
+    ``min_steps`` periods have passed, or ``heartbeat_steps`` have.
+    """
+    return (since >= heartbeat_steps) | ((error >= threshold) & (since >= min_steps))
 
 
 def in_range(dx: Any, dy: Any, link_range: float) -> Any:
@@ -142,6 +210,19 @@ class ChannelConfig:
             (``inf``: unlimited).
         failure_rate: rate λ at which a live link fails [1/s] (0: never).
         recovery_rate: rate μ at which a failed link recovers [1/s] (0: never).
+        message_bits: one message's size [bit] (default ``MESSAGE_BITS``: θ,
+            ẋ and the send time, 32 bits each).
+        event_threshold: δ ≥ 0 of event-triggered broadcasting [m, and m/s
+            for the velocity]; ``inf`` with a ``heartbeat``: a broadcast every
+            ``heartbeat`` seconds (at the first opportunity then); None:
+            periodic broadcasting at every opportunity.
+        min_interval: τ_min [s] between two broadcasts of a vessel under event
+            triggering, a whole number of control periods; None: dt.
+        heartbeat: T_max [s]: an event-triggered vessel broadcasts at its first
+            opportunity this long after its last broadcast; None: never forced.
+        budget_rate: the token bucket's refill rate [bit/s], > 0; None: no budget.
+        budget_burst: the bucket's size [bit], at least one message; None: one
+            message (``message_bits``).
     """
 
     loss: float = 0.0
@@ -153,6 +234,12 @@ class ChannelConfig:
     range: float = math.inf
     failure_rate: float = 0.0
     recovery_rate: float = 0.0
+    message_bits: int = MESSAGE_BITS
+    event_threshold: Any = None
+    min_interval: Any = None
+    heartbeat: Any = None
+    budget_rate: Any = None
+    budget_burst: Any = None
 
     def __post_init__(self) -> None:
         if isinstance(self.loss, (list, tuple, np.ndarray)):
@@ -197,11 +284,80 @@ class ChannelConfig:
             raise ConfigError(f"channel.range must be a distance > 0 m (inf: unlimited), got {rng!r}")
         check_number("channel", "failure_rate", self.failure_rate)
         check_number("channel", "recovery_rate", self.recovery_rate)
+        self._check_traffic()
+
+    def _check_traffic(self) -> None:
+        """The message size, event triggering and the budget."""
+        bits = self.message_bits
+        if isinstance(bits, bool) or not isinstance(bits, (int, np.integer)) or bits < 1:
+            raise ConfigError(f"channel.message_bits must be a whole number of bits ≥ 1, got {bits!r}")
+        object.__setattr__(self, "message_bits", int(bits))
+        if self.event_threshold is None:
+            for key in ("min_interval", "heartbeat"):
+                if getattr(self, key) is not None:
+                    raise ConfigError(
+                        f"channel.{key} = {getattr(self, key)!r} applies to event-triggered broadcasting only: "
+                        "give channel.event_threshold too"
+                    )
+        else:
+            delta = self.event_threshold
+            if isinstance(delta, bool) or not isinstance(delta, (int, float)) or not delta >= 0:
+                raise ConfigError(
+                    f"channel.event_threshold must be a number δ ≥ 0 (inf: heartbeat only), got {delta!r}"
+                )
+            if math.isinf(delta) and self.heartbeat is None:
+                raise ConfigError(
+                    "channel.event_threshold = inf sends only the first message: give channel.heartbeat (periodic "
+                    "broadcasting every heartbeat seconds)"
+                )
+            for key in ("min_interval", "heartbeat"):
+                if getattr(self, key) is not None:
+                    check_number("channel", key, getattr(self, key), strict=True)
+            if self.heartbeat is not None and self.min_interval is not None and self.heartbeat < self.min_interval:
+                raise ConfigError(
+                    f"channel.heartbeat = {self.heartbeat} s must be at least channel.min_interval = "
+                    f"{self.min_interval} s"
+                )
+        if self.budget_rate is None:
+            if self.budget_burst is not None:
+                raise ConfigError(
+                    f"channel.budget_burst = {self.budget_burst!r} needs channel.budget_rate (the bucket's refill rate)"
+                )
+            return
+        check_number("channel", "budget_rate", self.budget_rate, strict=True)
+        if self.budget_burst is not None:
+            check_number("channel", "budget_burst", self.budget_burst, strict=True)
+            if self.budget_burst < self.message_bits:
+                raise ConfigError(
+                    f"channel.budget_burst = {self.budget_burst} bit must hold one message of "
+                    f"channel.message_bits = {self.message_bits} bit"
+                )
 
     @property
     def is_ideal(self) -> bool:
-        """The default configuration: the paper's ideal links."""
-        return self == ChannelConfig()
+        """The paper's ideal links: the default configuration, whatever the message size."""
+        return dataclasses.replace(self, message_bits=MESSAGE_BITS) == ChannelConfig()
+
+    @property
+    def event_triggered(self) -> bool:
+        """Vessels broadcast on events (``event_threshold``), not periodically."""
+        return self.event_threshold is not None
+
+    @property
+    def has_budget(self) -> bool:
+        """A token bucket limits each vessel's broadcasts (``budget_rate``)."""
+        return self.budget_rate is not None
+
+    @property
+    def bucket(self) -> float:
+        """The token bucket's size [bit] (``budget_burst``, default one message)."""
+        return float(self.message_bits if self.budget_burst is None else self.budget_burst)
+
+    def event_steps(self, dt: float) -> tuple[int, int]:
+        """``(τ_min, T_max)`` in control periods (``NEVER`` without a heartbeat)."""
+        min_steps = 1 if self.min_interval is None else whole_periods(self.min_interval, dt, "channel.min_interval")
+        beat = NEVER if self.heartbeat is None else whole_periods(self.heartbeat, dt, "channel.heartbeat")
+        return min_steps, beat
 
     @property
     def max_delay(self) -> float:
@@ -222,6 +378,7 @@ class ChannelConfig:
         self.period_steps(dt)
         if self.tdma_slot is not None:
             self.slot_steps(dt)
+        self.event_steps(dt)
         if isinstance(self.loss, tuple) and np.shape(self.loss) != (n, n):
             raise ConfigError(f"channel.loss as a matrix must have shape ({n}, {n}), got {np.shape(self.loss)}")
 
@@ -252,6 +409,12 @@ class LinkChannel:
         tdma, every: TDMA on; control periods per slot (TDMA) or per transmission.
         p_fail, p_recover: per-period failure and recovery probabilities.
         loss_matrix: the Bernoulli loss (a probability or an ``(N, N)`` matrix).
+        mode: ``PERIODIC``, ``EVENT`` (``event_threshold``) or ``TRANSMIT`` (the policies decide).
+        sent_theta, sent_xdot, sent_time, sent_step: ``(B, N)`` each vessel's last
+            broadcast (``θ_s = inf``, ``sent_step = −NOT_SENT`` before the first).
+        tokens: ``(B, N)`` bits in each vessel's bucket (``budget_rate``).
+        wants: ``(B, N)`` the policies' decisions for the next update (``TRANSMIT``).
+        counts: ``(B, len(COUNTERS), N)`` the messages of the last update, by ``COUNTERS``.
     """
 
     def __init__(
@@ -262,6 +425,7 @@ class LinkChannel:
         schedule: Sequence[tuple[float, np.ndarray]],
         max_steps: int,
         num_envs: int,
+        transmit: bool = False,
     ) -> None:
         """
         Args:
@@ -272,6 +436,7 @@ class LinkChannel:
                 periodically; a fixed graph is ``((math.inf, adjacency),)``.
             max_steps: control periods per episode (delays are capped there).
             num_envs: formations ``B``.
+            transmit: the vessels' policies decide when to broadcast (``wants``).
         """
         ch = channel
         self.channel: ChannelConfig = ch
@@ -305,6 +470,18 @@ class LinkChannel:
         self.pend_time = np.zeros(deep)
         self.next_arrival = np.full(b, NEVER, dtype=np.int64)
         self.uniforms = BlockStream(b, self.draws_per_link * n * n)
+        # who broadcasts: the mode, the last broadcast of each vessel, its token bucket, the counters
+        self.mode = TRANSMIT if transmit else (EVENT if ch.event_triggered else PERIODIC)
+        self.min_steps, self.heartbeat_steps = ch.event_steps(dt)
+        self.threshold = 0.0 if ch.event_threshold is None else float(ch.event_threshold)
+        self.refill = float(ch.budget_rate) * dt if ch.has_budget else 0.0
+        self.sent_theta = np.full((b, n), np.inf)
+        self.sent_xdot = np.zeros((b, n))
+        self.sent_time = np.zeros((b, n))
+        self.sent_step = np.full((b, n), -NOT_SENT, dtype=np.int64)
+        self.tokens = np.full((b, n), ch.bucket)
+        self.wants = np.ones((b, n), dtype=bool)
+        self.counts = np.zeros((b, len(COUNTERS), n), dtype=np.int64)
 
     # ------------------------------------------------------------------ draws
     @property
@@ -362,11 +539,15 @@ class LinkChannel:
         return np.broadcast_to(np.mod(steps, self.every) == 0, (len(steps), self.n))
 
     def reset(self, ids: np.ndarray) -> None:
-        """Forget everything of formations ``ids``: no messages, every link live, chains stationary."""
+        """Forget everything of formations ``ids``: no messages, every link live, chains stationary,
+        nothing broadcast, full buckets."""
         for arr in (self.up, self.has_message, self.failed, self.transmitted):
             arr[ids] = False
-        for arr in (self.held_theta, self.held_xdot, self.held_time):
+        for arr in (self.held_theta, self.held_xdot, self.held_time, self.sent_xdot, self.sent_time):
             arr[ids] = 0.0
+        self.sent_theta[ids] = np.inf
+        self.sent_step[ids] = -NOT_SENT
+        self.tokens[ids] = self.channel.bucket
         self.pend_valid[ids] = False
         self.next_arrival[ids] = NEVER
         burst = self.channel.burst
@@ -394,9 +575,12 @@ class LinkChannel:
         """
         ch = self.channel
         rows = self._rows(ids)
-        tx = self.transmitters(steps)
+        steps = np.asarray(steps)
+        counts = np.zeros((len(ids), len(COUNTERS), self.n), dtype=np.int64)
+        tx = self._broadcasts(rows, steps, np.asarray(time), theta, xdot, counts)
         draws = iter(self._instant_uniforms(ids, tx))
-        up = self.graph_at(time).copy()
+        graph = self.graph_at(time)
+        up = graph.copy()
         if math.isfinite(ch.range):
             gap = positions[:, :, None, :] - positions[:, None, :, :]
             up &= in_range(gap[..., 0], gap[..., 1], ch.range)
@@ -410,6 +594,7 @@ class LinkChannel:
         self.up[rows] = up
         self.transmitted[rows] = tx
         send = up & tx[:, None, :]
+        counts[:, RANGE] = (graph & ~up & tx[:, None, :]).sum(axis=1)
         if ch.burst is not None:
             r = next(draws)
             bad = self.bad[rows]
@@ -420,6 +605,9 @@ class LinkChannel:
         else:
             p_loss = self.loss_matrix
         delivered = send & (next(draws) >= p_loss)
+        counts[:, DELIVERED] = delivered.sum(axis=1)
+        counts[:, LOSS] = (send & ~delivered).sum(axis=1)
+        self.counts[rows] = counts
         delay = ch.latency + (ch.jitter * next(draws) if ch.jitter > 0 else 0.0)
         delay_steps = np.ceil(delay / self.dt - 1e-9).astype(np.int64) if ch.max_delay > 0 else 0
         delivered &= delay_steps <= self.max_delay_steps  # later than the episode's end: never seen
@@ -450,6 +638,40 @@ class LinkChannel:
             self.has_message[rows] = has | newer
             self.pend_valid[now] = False
         self._advance_next_arrival(ids, np.asarray(steps))
+
+    def _broadcasts(
+        self, rows: Any, steps: np.ndarray, time: np.ndarray, theta: np.ndarray, xdot: np.ndarray, counts: np.ndarray
+    ) -> np.ndarray:
+        """``(m, N)`` which vessels broadcast now (module docstring, steps 2-4), recorded as their last
+        broadcast; the per-broadcast counters into ``counts``."""
+        opportunity = self.transmitters(steps)
+        if self.mode == TRANSMIT:  # at reset there is no decision yet: every vessel tries
+            attempt = self.wants[rows] | (steps == 0)[:, None]
+            clear = attempt & opportunity
+        elif self.mode == EVENT:
+            error = prediction_error(
+                theta, xdot, self.sent_theta[rows], self.sent_xdot[rows], time[:, None] - self.sent_time[rows]
+            )
+            since = steps[:, None] - self.sent_step[rows]
+            attempt = clear = opportunity & event_due(
+                error, self.threshold, since, self.min_steps, self.heartbeat_steps
+            )
+        else:
+            attempt = clear = opportunity
+        tx = clear
+        if self.channel.has_budget:
+            bits, bucket = self.channel.message_bits, self.channel.bucket
+            tokens = np.where((steps == 0)[:, None], bucket, np.minimum(self.tokens[rows] + self.refill, bucket))
+            tx = clear & (tokens >= bits)
+            self.tokens[rows] = tokens - bits * tx
+        counts[:, ATTEMPTED] = attempt
+        counts[:, SENT] = tx
+        counts[:, SCHEDULE] = attempt & ~clear
+        counts[:, BUDGET] = clear & ~tx
+        for held, now in ((self.sent_theta, theta), (self.sent_xdot, xdot), (self.sent_time, time[:, None])):
+            held[rows] = np.where(tx, now, held[rows])
+        self.sent_step[rows] = np.where(tx, steps[:, None], self.sent_step[rows])
+        return np.asarray(tx)
 
     def _advance_next_arrival(self, ids: np.ndarray, steps: np.ndarray) -> None:
         """After the arrivals at ``steps``: the next instant at which a message of each formation arrives.

@@ -64,7 +64,7 @@ import numpy as np
 
 from marine_formation_env.actions import map_actions
 from marine_formation_env.backends import resolve_backend
-from marine_formation_env.channel import LinkChannel
+from marine_formation_env.channel import COUNTERS, SENT, LinkChannel
 from marine_formation_env.control import (
     curved_heading_inputs,
     curved_path_following_inputs,
@@ -109,12 +109,15 @@ from marine_formation_env.scenarios import ScenarioConfig, min_separation
 from marine_formation_env.settings import TRACKING_TERMS
 from marine_formation_env.streams import channel_streams
 
-__all__ = ["REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
+__all__ = ["MESSAGE_KEYS", "REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
 
 #: Appended to a wrong-shape message of a state array.
 COLUMNS_HINT = " (columns x, y, psi, u, v, r)"
 
-REWARD_COMPONENTS = (*TRACKING_TERMS, "effort", "terminal")
+REWARD_COMPONENTS = (*TRACKING_TERMS, "effort", "terminal", "communication")
+#: The message counters of a control instant (``marine_formation_env.channel``, ``COUNTERS``) as info keys,
+#: and the bits sent.
+MESSAGE_KEYS = (*(f"messages_{name}" for name in COUNTERS), "bits_sent")
 
 
 @dataclass
@@ -131,6 +134,8 @@ class StepOutput:
         collision: ``(B,)`` two vessels closer than the safety distance.
         out_of_bounds: ``(B,)`` a vessel left the workspace or the envelope
             (|u|, |v| > max_speed, |r| > max_yaw_rate), or the state is not finite.
+        messages: the messages of the control instant that ends the step, by
+            ``MESSAGE_KEYS``, each ``(B, N)`` int64 (``FormationCore.messages``).
     """
 
     observation: np.ndarray
@@ -141,16 +146,20 @@ class StepOutput:
     commanded_speed: np.ndarray | None
     collision: np.ndarray
     out_of_bounds: np.ndarray
+    messages: dict[str, np.ndarray]
 
 
-def reset_output(observation: np.ndarray, has_commanded_speed: bool) -> StepOutput:
+def reset_output(
+    observation: np.ndarray, has_commanded_speed: bool, messages: dict[str, np.ndarray] | None = None
+) -> StepOutput:
     """The ``StepOutput`` of a reset: its observation, and zeros where nothing has happened yet.
 
     Front ends build ``reset()``'s infos from it with the same code as
     ``step()``'s, so both have the same keys (TorchRL and other wrappers build
     their info specs from ``reset()``): zero rewards and reward components, no
     collision, not out of bounds, not done, and a commanded speed of 0 m/s
-    (no command yet) at the levels that have one.
+    (no command yet) at the levels that have one; ``messages`` are those of
+    the reset instant (``FormationCore.messages``; None: none).
     """
     b, n = observation.shape[:2]
     zeros = np.zeros((b, n))
@@ -164,6 +173,7 @@ def reset_output(observation: np.ndarray, has_commanded_speed: bool) -> StepOutp
         commanded_speed=zeros.copy() if has_commanded_speed else None,
         collision=flags.copy(),
         out_of_bounds=flags.copy(),
+        messages=messages if messages is not None else {key: np.zeros((b, n), dtype=np.int64) for key in MESSAGE_KEYS},
     )
 
 
@@ -201,7 +211,7 @@ class FormationCore:
         self.config = config
         self.num_envs = int(num_envs)
         self.n = config.n_vessels
-        self.layout = ObservationLayout(self.n, config.observation_slots)
+        self.layout = ObservationLayout(self.n, config.observation_slots, transmit=config.transmit)
         self.action_dim = config.action_dim
         n = self.n
         self._dx = np.ascontiguousarray(config.formation[:, 0])
@@ -229,8 +239,14 @@ class FormationCore:
                 [(dwell, g.adjacency) for dwell, g in config.topology_schedule] or [(math.inf, config.graph.adjacency)],
                 config.max_steps,
                 self.num_envs,
+                transmit=config.transmit,
             )
         )
+        # with ideal links every vessel broadcasts at every control instant and reaches its out-neighbours
+        ideal = np.zeros((len(COUNTERS), n), dtype=np.int64)
+        ideal[[0, 1]] = 1  # attempted, sent
+        ideal[2] = config.graph.adjacency.sum(axis=0)  # delivered
+        self._ideal_counts = ideal
         self.sensor_noise = (
             None if config.sensor_noise.is_zero else SensorNoiseSource(config.sensor_noise, n, self.num_envs)
         )
@@ -358,6 +374,10 @@ class FormationCore:
             raise ValueError(f"actions must be finite, but actions{list(bad)} = {actions[bad]}")
         clipped = np.clip(actions, -1.0, 1.0)
         commands = map_actions(cfg, clipped)
+        if cfg.transmit:
+            assert self.channel is not None
+            self.channel.wants[:] = clipped[..., -1] > 0.0
+            clipped = np.ascontiguousarray(clipped[..., : cfg.control_dim])  # the effort term charges the commands
         if self._fresh.any():
             fresh = self._fresh
             if "u_c" in commands:
@@ -386,6 +406,14 @@ class FormationCore:
                     field[restart_ids] = 0
                 for value in out.components.values():
                     value[restart_ids] = 0.0
+        out.messages = self.messages()
+        if cfg.transmit:
+            self._traffic(out.observation, slice(None))
+        if cfg.reward.message_cost > 0:
+            cost = -cfg.reward.message_cost * out.messages["messages_sent"]
+            cost[restart_ids] = 0.0  # a new episode's first output has no reward
+            out.components["communication"] = cost
+            out.reward = out.reward + cost
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
         if e_start is not None:  # integral LOS: one Euler step of its integrator per control period
@@ -461,7 +489,7 @@ class FormationCore:
         obs, comps, reward, flags = self._kernel.run(
             self.state, cmd, self._last_u_c, time0, steer_dy, self.time, self.steps, actions, restart, starts, self.arc
         )
-        components = dict(zip(REWARD_COMPONENTS, comps, strict=True))
+        components = dict(zip(REWARD_COMPONENTS, (*comps, np.zeros((b, n))), strict=True))
         terminated = flags[:, 0] | flags[:, 1]
         return StepOutput(
             observation=obs,
@@ -472,6 +500,7 @@ class FormationCore:
             commanded_speed=None if "u_c" not in commands else np.array(commands["u_c"], copy=True),
             collision=flags[:, 0].copy(),
             out_of_bounds=flags[:, 1].copy(),
+            messages={},
         )
 
     def closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
@@ -623,7 +652,8 @@ class FormationCore:
         out[..., 6] = cfg.u_d.rate(time)[:, None]
         out[..., LANE_OFFSET] = self._dy
         # the n − 1 vessels' slots (padding slots beyond them stay 0: not linked)
-        slots = out[..., self.layout.own :].reshape(b, n, self.layout.slots, self.layout.slot)[:, :, : n - 1]
+        slot_part = out[..., self.layout.own : self.layout.own + self.layout.slot * self.layout.slots]
+        slots = slot_part.reshape(b, n, self.layout.slots, self.layout.slot)[:, :, : n - 1]
         if coords is not None:
             theta, x_dot = coords.ell - self._dx, coords.ell_dot
         if self.channel is None:
@@ -639,7 +669,30 @@ class FormationCore:
                 theta, x_dot = self._along_track(s, time, inertial=True)
             for k, feature in enumerate(self.channel.slots(ids, self._slot_index, time, theta, x_dot)):
                 slots[..., k] = feature
+            if cfg.transmit:
+                self._traffic(out, ids)
         return np.clip(out, self.obs_low, self.obs_high, out=out)
+
+    def messages(self, env_ids: np.ndarray | slice | None = None) -> dict[str, np.ndarray]:
+        """The messages of the last control instant per vessel, by ``MESSAGE_KEYS``, each ``(B, N)`` int64
+        (with ``env_ids``, those formations'). With ideal links every vessel broadcasts once and reaches
+        each out-neighbour of the graph."""
+        ids = slice(None) if env_ids is None else env_ids
+        if self.channel is None:
+            b = len(self.time[ids])
+            counts = np.broadcast_to(self._ideal_counts, (b, *self._ideal_counts.shape))
+        else:
+            counts = self.channel.counts[ids]
+        out = {key: np.array(counts[:, k]) for k, key in enumerate(MESSAGE_KEYS[:-1])}
+        out["bits_sent"] = counts[:, SENT] * self.config.channel.message_bits
+        return out
+
+    def _traffic(self, obs: np.ndarray, ids: np.ndarray | slice) -> None:
+        """Write ``TRANSMIT_FEATURES`` into the last entries of observations ``obs`` of formations ``ids``."""
+        channel = self.channel
+        assert channel is not None
+        obs[..., -2] = channel.tokens[ids] / channel.channel.bucket
+        obs[..., -1] = np.minimum(self.time[ids][:, None] - channel.sent_time[ids], self.config.horizon)
 
     def links_up(self, b: int) -> np.ndarray:
         """``(N, N)`` booleans of formation ``b``: ``[j, i]`` iff the link i → j exists now."""
@@ -686,6 +739,7 @@ class FormationCore:
         components["terminal"] = np.broadcast_to(
             terminal_term(terminated, w.terminal_rate, cfg.horizon - self.time)[:, None], (self.num_envs, self.n)
         ).copy()
+        components["communication"] = np.zeros((self.num_envs, self.n))
         reward = sum(components.values())
         truncated = (self.steps >= cfg.max_steps) & ~terminated
         return StepOutput(
@@ -697,4 +751,5 @@ class FormationCore:
             commanded_speed=None if u_c is None else np.array(u_c, copy=True),
             collision=collision,
             out_of_bounds=out_of_bounds,
+            messages={},
         )

@@ -11,7 +11,14 @@ from pettingzoo import ParallelEnv
 
 from marine_formation_env.actions import action_space
 from marine_formation_env.core import StepOutput, reset_output
-from marine_formation_env.frontend import Rendering, one_entry, open_front_end, read_reset, vessel_infos
+from marine_formation_env.frontend import (
+    Rendering,
+    action_size_hint,
+    one_entry,
+    open_front_end,
+    read_reset,
+    vessel_infos,
+)
 from marine_formation_env.observations import observation_space
 from marine_formation_env.scenarios import ScenarioConfig, sample_initial_state
 
@@ -363,7 +370,9 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
         self._started = True
         if self.render_mode == "human":
             self.render()
-        return self._per_agent(obs), self._infos(reset_output(obs[None], self.config.action_level != "force"))
+        return self._per_agent(obs), self._infos(
+            reset_output(obs[None], self.config.action_level != "force", self.core.messages())
+        )
 
     def step(
         self, actions: dict[str, Any]
@@ -451,7 +460,8 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
             except (TypeError, ValueError):
                 raise ValueError(f"action of {agent} must be numeric, got {action!r}") from None
             if arr.shape != (dim,):
-                raise ValueError(f"action of {agent} must have shape ({dim},), got {np.shape(action)}")
+                hint = action_size_hint(self.config, arr.size)
+                raise ValueError(f"action of {agent} must have shape ({dim},), got {np.shape(action)}{hint}")
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"action of {agent} must be finite, got {arr.tolist()}")
             batch[0, self._index[agent]] = arr

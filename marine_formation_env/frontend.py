@@ -13,15 +13,21 @@ are ``reward_<term>`` (``REWARD_INFO_KEYS``, read back by name with
 
 * **per vessel** (ParallelEnv ``infos[agent]``, vector env ``layout="agent"``
   entries): ``reward_cross_track``, ``reward_heading``, ``reward_coordination``,
-  ``reward_speed``, ``reward_effort``, ``reward_terminal`` (that vessel's
-  terms; they sum to its reward), ``time`` [s], ``collision``,
-  ``out_of_bounds`` (the formation's flags), and ``commanded_speed`` u_c [m/s]
-  at the ``speed`` and ``guidance`` levels.
+  ``reward_speed``, ``reward_effort``, ``reward_terminal``,
+  ``reward_communication`` (that vessel's terms; they sum to its reward),
+  ``time`` [s], ``collision``, ``out_of_bounds`` (the formation's flags),
+  ``commanded_speed`` u_c [m/s] at the ``speed`` and ``guidance`` levels, and
+  the messages of the control instant (``MESSAGE_KEYS``, whole numbers):
+  ``messages_attempted``, ``messages_sent``, ``messages_delivered``,
+  ``messages_dropped_loss``, ``messages_dropped_range``,
+  ``messages_dropped_schedule``, ``messages_dropped_budget`` and
+  ``bits_sent`` (``marine_formation_env.channel`` defines each).
 * **per formation** (``gymnasium.make`` info, vector env ``layout="joint"``
   entries): ``vessel_rewards`` ``(N,)``, the ``reward_<term>`` entries (the
   mean over the vessels; they sum to the formation's reward, the mean of the
-  vessels'), ``time``, ``collision``, ``out_of_bounds``, and
-  ``commanded_speed`` ``(N,)``.
+  vessels'), ``time``, ``collision``, ``out_of_bounds``,
+  ``commanded_speed`` ``(N,)``, and the message counters summed over the
+  vessels.
 
 The vector env stacks these over its entries (arrays with a leading
 ``num_envs`` axis); the single-formation views hold plain Python numbers.
@@ -67,6 +73,7 @@ __all__ = [
     "InitialStates",
     "Rendering",
     "ResetRequest",
+    "action_size_hint",
     "check_initial_state",
     "check_reset_options",
     "formation_infos",
@@ -312,6 +319,7 @@ def vessel_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     }
     if out.commanded_speed is not None:
         infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
+    infos.update({key: np.array(value, dtype=np.int64) for key, value in out.messages.items()})
     return infos
 
 
@@ -326,7 +334,20 @@ def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     }
     if out.commanded_speed is not None:
         infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
+    infos.update({key: np.asarray(value, dtype=np.int64).sum(axis=1) for key, value in out.messages.items()})
     return infos
+
+
+def action_size_hint(config: ScenarioConfig, size: int) -> str:
+    """What to add to a wrong-size action's message: with ``transmit`` an action of the level's size alone is
+    one from a policy that does not send the ``transmit`` entry."""
+    if config.transmit and size == config.control_dim:
+        return (
+            f" (the scenario has transmit=True: each vessel's action ends with a transmit entry, > 0 to broadcast; "
+            f"a policy that does not send it, with actions of the {config.action_level!r} level's size "
+            f"{config.control_dim}, cannot act here)"
+        )
+    return ""
 
 
 def reward_terms(infos: Mapping[str, Any]) -> dict[str, Any]:

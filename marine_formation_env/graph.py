@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GRAPH_PRESETS", "CommGraph", "GraphError", "make_graph"]
+__all__ = ["GRAPH_PRESETS", "CommGraph", "GraphError", "make_graph", "spread_bound"]
 
 
 class GraphError(ValueError):
@@ -262,3 +262,31 @@ def make_graph(name: str, n: int, seed: int | None = None, p: float = 0.2) -> Co
     else:
         graph = _random_graph(n, seed, p)
     return graph.bidirectional() if name.endswith("_bidirectional") else graph
+
+
+def spread_bound(graph: CommGraph, delta: float) -> float:
+    """The largest along-path spread ``max θ − min θ`` [m] at which the coordination law (20) can settle when
+    each vessel knows its neighbours' ``θ_i`` only within ``δ`` (event-triggered broadcasting, ideal links).
+
+    Derived for a graph led by one vessel ``r`` that listens to none (``A_r = ∅``, as in ``paper`` and
+    ``chain``). At rest every vessel runs at the leader's speed ``u_d``, so the law's sum over what vessel
+    ``j`` believes, ``Σ_{i∈A_j} (θ_j − θ̂_i)``, is 0; with ``θ̂_i = θ_i + ε_i``, ``|ε_i| < δ``, the true
+    offsets from the leader ``θ̃ = θ − θ_r`` solve ``L̃ θ̃ = ε̄`` with ``L̃`` the Laplacian without the
+    leader's row and column and ``|ε̄_j| ≤ |A_j|·δ``. Hence ``|θ̃_k| ≤ b_k = δ·Σ_j |L̃⁻¹|_{kj}·|A_j|`` and
+    the spread is at most the sum of the two largest ``b_k`` (with ``b_r = 0``). For ``paper``:
+    ``b = (δ, 1.5·δ)``, a bound of ``2.5·δ``.
+
+    Raises:
+        GraphError: the graph has no single vessel that listens to none.
+    """
+    adjacency = graph.adjacency.astype(bool)
+    leaders = [j for j in range(graph.n) if not adjacency[j].any()]
+    if len(leaders) != 1:
+        raise GraphError(
+            f"spread_bound needs one vessel that listens to none (a leader), graph {graph.name!r} has {len(leaders)}"
+        )
+    others = [j for j in range(graph.n) if j != leaders[0]]
+    grounded = graph.laplacian[np.ix_(others, others)]
+    per_vessel = np.abs(np.linalg.inv(grounded)) @ adjacency[others].sum(axis=1) * delta
+    largest = np.sort(np.append(per_vessel, 0.0))[::-1]
+    return float(largest[0] + largest[1])

@@ -36,6 +36,7 @@ from marine_formation_env.core import StepOutput, reset_output
 from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import (
     Rendering,
+    action_size_hint,
     formation_infos,
     one_entry,
     open_front_end,
@@ -93,7 +94,9 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
         self._done = False
         if self.render_mode == "human":
             self.render()
-        return obs[0].reshape(-1), self._info(reset_output(obs, self.config.action_level != "force"))
+        return obs[0].reshape(-1), self._info(
+            reset_output(obs, self.config.action_level != "force", self.core.messages())
+        )
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the joint action ``(N·A,)`` for one control period."""
@@ -101,7 +104,9 @@ class MarineFormationGymEnv(gym.Env[np.ndarray, np.ndarray]):
             raise RuntimeError("the episode has ended (or never started); call reset() before step()")
         arr = float_array(action, "action")
         if arr.shape != self.action_space.shape:
-            raise ValueError(f"action must have shape {self.action_space.shape}, got {arr.shape}")
+            n = self.config.n_vessels
+            hint = action_size_hint(self.config, arr.size // n) if arr.size % n == 0 else ""
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {arr.shape}{hint}")
         out = self.core.step(arr.reshape(1, self.config.n_vessels, self.config.action_dim))
         terminated, truncated = bool(out.terminated[0]), bool(out.truncated[0])
         self._done = terminated or truncated

@@ -15,7 +15,11 @@ from gymnasium import spaces
 from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["MIN_CURVATURE_BOUND", "ObservationLayout", "observation_bounds", "observation_space"]
+__all__ = ["MIN_CURVATURE_BOUND", "TRANSMIT_FEATURES", "ObservationLayout", "observation_bounds", "observation_space"]
+
+#: The entries a vessel that decides when to broadcast observes last: the share of its token bucket left
+#: (1 without a budget) and the time since its last broadcast, or since reset before the first [s].
+TRANSMIT_FEATURES = ("budget_left", "since_broadcast")
 
 #: The curvature entries' bound [1/m] is at least this (a radius of 100 m), so that
 #: observation spaces of straight and gently curved scenarios are the same.
@@ -30,7 +34,8 @@ class ObservationLayout:
     followed by one slot (``SLOT_FEATURES``) per
     other vessel ``i = (j + k + 1) mod N``, ``k = 0 … N−2``: ordered relative to
     ``j``, so one shared policy sees "the next vessel", "the one after" and so
-    on in the same place for every vessel.
+    on in the same place for every vessel; with ``transmit``, the
+    ``TRANSMIT_FEATURES`` last.
     """
 
     n_vessels: int
@@ -39,6 +44,13 @@ class ObservationLayout:
 
     own: int = len(OWN_FEATURES)
     slot: int = len(SLOT_FEATURES)
+    #: the policies decide when to broadcast (``ScenarioConfig.transmit``): ``TRANSMIT_FEATURES`` at the end
+    transmit: bool = False
+
+    @property
+    def traffic(self) -> int:
+        """Entries after the slots: ``TRANSMIT_FEATURES`` with ``transmit``, else none."""
+        return len(TRANSMIT_FEATURES) if self.transmit else 0
 
     @property
     def slots(self) -> int:
@@ -48,7 +60,7 @@ class ObservationLayout:
     @property
     def dim(self) -> int:
         """Length of one agent's observation."""
-        return self.own + self.slot * self.slots
+        return self.own + self.slot * self.slots + self.traffic
 
     def slot_vessels(self, j: int) -> list[int]:
         """The vessel held in each slot of vessel ``j``'s observation."""
@@ -61,7 +73,7 @@ class ObservationLayout:
         Padding slots (``observation_slots`` > N − 1) are left out.
         """
         own = obs[..., : self.own]
-        slots = obs[..., self.own :].reshape(*obs.shape[:-1], self.slots, self.slot)
+        slots = obs[..., self.own : self.own + self.slot * self.slots].reshape(*obs.shape[:-1], self.slots, self.slot)
         return own, slots[..., : self.n_vessels - 1, :]
 
 
@@ -95,8 +107,9 @@ def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
     dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
     slot_low = [0.0, -dtheta, -dxdot, 0.0]
     slot_high = [1.0, dtheta, dxdot, cfg.horizon]
-    low = np.array(own_low + slot_low * cfg.observation_slots, dtype=np.float32)
-    high = np.array(own_high + slot_high * cfg.observation_slots, dtype=np.float32)
+    traffic_low, traffic_high = ([0.0, 0.0], [1.0, cfg.horizon]) if cfg.transmit else ([], [])
+    low = np.array(own_low + slot_low * cfg.observation_slots + traffic_low, dtype=np.float32)
+    high = np.array(own_high + slot_high * cfg.observation_slots + traffic_high, dtype=np.float32)
     return low, high
 
 
@@ -111,7 +124,8 @@ def observation_space(config: ScenarioConfig, joint: bool = False) -> spaces.Box
     max |D_y|); link bits in
     [0, 1]; coordination differences within the workspace's x-extent plus the
     spread of D_x; ẋ differences within ±2√2·max_speed; ages in
-    [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
+    [0, horizon]; with ``transmit`` the budget left in [0, 1] and the time
+    since the last broadcast in [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
     envelope terminates, so only its last observation can reach past the
     bounds, and it is clipped to them.
     """

@@ -29,6 +29,7 @@ from marine_formation_env.disturbances import Current, SensorNoise
 from marine_formation_env.errors import (
     ConfigError,
     build_config,
+    check_bool,
     check_number,
     check_seed,
     checked_array,
@@ -147,6 +148,8 @@ class ScenarioConfig:
         corridor: on a curved path, the largest |e| [m] before a vessel is
             out of bounds (``inf`` on the straight path).
         observation_slots: slots per observation (≥ n − 1; beyond n − 1 empty).
+        transmit: the policies decide when each vessel broadcasts (an action
+            entry and two observation entries more).
     """
 
     name: str
@@ -183,6 +186,7 @@ class ScenarioConfig:
     path: Path
     corridor: float
     observation_slots: int
+    transmit: bool
 
     # --------------------------------------------------------------- derived
     @functools.cached_property
@@ -203,7 +207,8 @@ class ScenarioConfig:
     @property
     def ideal_observations(self) -> bool:
         """Ideal links, one fixed graph and noise-free measurements: the paper's information."""
-        return self.channel.is_ideal and not self.topology_schedule and self.sensor_noise.is_zero
+        ideal = self.channel.is_ideal and not self.topology_schedule and self.sensor_noise.is_zero
+        return ideal and not self.transmit
 
     @property
     def graph(self) -> CommGraph:
@@ -221,9 +226,14 @@ class ScenarioConfig:
         return max(1, round(self.horizon / self.dt))
 
     @property
-    def action_dim(self) -> int:
-        """Per-vessel action size: 2 (force, guidance) or 1 (speed)."""
+    def control_dim(self) -> int:
+        """The level's commands in each vessel's action: 2 (force, guidance) or 1 (speed)."""
         return 1 if self.action_level == "speed" else 2
+
+    @property
+    def action_dim(self) -> int:
+        """Per-vessel action size: ``control_dim``, plus the ``transmit`` entry when the policies decide."""
+        return self.control_dim + int(self.transmit)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-friendly description (resolved values; an infinite number is the string ``"inf"``)."""
@@ -314,6 +324,7 @@ def resolve(settings: Settings) -> ScenarioConfig:
         path=path,
         corridor=corridor,
         observation_slots=_resolve_slots(s.observation_slots, n),
+        transmit=_resolve_transmit(s.transmit),
     )
     problem = initial_state_problem(config, config.start_state, noise.as_array())
     if problem is not None:
@@ -339,6 +350,12 @@ def _resolve_identity(s: Settings) -> tuple[int, int]:
         raise ConfigError(str(err)) from None
     assert seed is not None
     return int(n), seed
+
+
+def _resolve_transmit(transmit: Any) -> bool:
+    """``transmit``: True or False."""
+    check_bool("settings", "transmit", transmit)
+    return bool(transmit)
 
 
 def _resolve_slots(slots: Any, n: int) -> int:

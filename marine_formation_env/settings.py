@@ -149,6 +149,10 @@ class RewardConfig:
     (``train_reward``) to see a slope near the goal that the broad scales leave
     almost flat. The default ``fine_scale`` 0.05 puts the fine scales at 1 m,
     0.01 rad, 1 m and 0.05 m/s.
+
+    ``message_cost`` charges each vessel that much reward per broadcast it
+    sends (the ``communication`` term); 0 by default, so the benchmark's
+    reward does not price messages.
     """
 
     cross_track: float = 1.0
@@ -164,6 +168,7 @@ class RewardConfig:
     fine_scale: float = 0.05
     fine_terms: tuple[str, ...] = TRACKING_TERMS
     terminal_penalty: bool = True
+    message_cost: float = 0.0
 
     def __post_init__(self) -> None:
         check_bool("reward", "terminal_penalty", self.terminal_penalty)
@@ -293,6 +298,11 @@ class Settings:
             as for a vessel it does not hear), which gives teams of different
             sizes one observation length: a policy over slots (attention, a
             graph network) trains on several team sizes at once.
+        transmit: each vessel's policy decides when it broadcasts: its action
+            gets a last entry, ``transmit`` (> 0: broadcast now), and its
+            observation two last entries, the share of its budget left and the
+            time since its last broadcast [s] (``marine_formation_env.channel``).
+            False: the channel's rule decides (periodic or event-triggered).
     """
 
     name: str = "custom"
@@ -329,6 +339,7 @@ class Settings:
     path: Any = field(default_factory=StraightPath)
     corridor: Any = None
     observation_slots: Any = None
+    transmit: bool = False
 
 
 #: The lawnmower route of the ``survey`` presets (docs/paths.md).
@@ -392,6 +403,22 @@ SCENARIOS: dict[str, dict[str, Any]] = {
     # (spacing = 2·turn_radius): 9.0 km of route from the first waypoint to the last, which the formation
     # passes after about 1820 s at 5 m/s; the episode ends 180 s later, on the last leg run on.
     "survey": {**_PAPER, "name": "survey", "path": SURVEY_ROUTE, "horizon": 2000.0},
+}
+#: Bandwidth budgets that periodic broadcasting exceeds several times over (docs/channel.md, "Budgets"):
+#:
+#: * ``paper_budget``: the paper's links with a token bucket of 48 bit/s, one 96-bit message every 2 s, and a
+#:   burst of 4 messages; periodic broadcasting at dt = 0.5 s would need 192 bit/s, 4 times as much.
+#: * ``acoustic_budget``: the ``acoustic`` links with 96 bit per 36 s, one message every 36 s, and a burst of
+#:   2 messages; TDMA's slot every 12 s would need 3 times as much.
+SCENARIOS["paper_budget"] = {
+    **_PAPER,
+    "name": "paper_budget",
+    "channel": ChannelConfig(budget_rate=48.0, budget_burst=384.0),
+}
+SCENARIOS["acoustic_budget"] = {
+    **SCENARIOS["acoustic"],
+    "name": "acoustic_budget",
+    "channel": dataclasses.replace(SCENARIOS["acoustic"]["channel"], budget_rate=96.0 / 36.0, budget_burst=192.0),
 }
 SCENARIOS["survey_acoustic"] = {
     **SCENARIOS["survey"],

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from marine_formation_env.core import FormationCore, StepOutput, reset_output
+from marine_formation_env.core import MESSAGE_KEYS, FormationCore, StepOutput, reset_output
 from marine_formation_env.errors import ConfigError, check_seed
 from marine_formation_env.frontend import (
     REWARD_INFO_KEYS,
@@ -92,7 +92,7 @@ GROUP = "vessel"
 _ROOT_KEYS = frozenset({"state", "done", "terminated", "truncated", "next"})
 
 #: The entries of ``("vessel", "info")`` at every level (``commanded_speed`` is added at ``speed``/``guidance``).
-INFO_KEYS = (*REWARD_INFO_KEYS, "time", "collision", "out_of_bounds")
+INFO_KEYS = (*REWARD_INFO_KEYS, "time", "collision", "out_of_bounds", *MESSAGE_KEYS)
 
 
 class MarineFormationTorchEnv(EnvBase):
@@ -246,7 +246,7 @@ class MarineFormationTorchEnv(EnvBase):
             self._obs = self._obs.copy()
             self._obs[ids] = self.core.reset(self._initial.draw(ids), env_ids=ids)
         # the untouched formations report their current observation (TorchRL keeps their entries anyway)
-        return self._tensordict(reset_output(self._obs, self._has_speed), reward=False)
+        return self._tensordict(reset_output(self._obs, self._has_speed, self.core.messages()), reward=False)
 
     def set_initial_spread(self, scale: float) -> None:
         """Start later resets ``scale`` of the way from the formation on its lanes to the scenario's initial state.

@@ -52,6 +52,7 @@ from marine_formation_env.errors import float_array
 from marine_formation_env.frontend import (
     InitialStates,
     Rendering,
+    action_size_hint,
     formation_infos,
     open_front_end,
     read_reset,
@@ -148,7 +149,9 @@ class MarineFormationVectorEnv(VectorEnv):
         self._needs_reset[:] = False
         self._started = True
         obs = self.core.observe()
-        return self._layout_obs(obs), self._infos(reset_output(obs, self.config.action_level != "force"))
+        return self._layout_obs(obs), self._infos(
+            reset_output(obs, self.config.action_level != "force", self.core.messages())
+        )
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
@@ -158,7 +161,8 @@ class MarineFormationVectorEnv(VectorEnv):
         b, n, a = self.num_formations, self.n_vessels, self.config.action_dim
         arr = float_array(actions, "actions")
         if arr.shape != self.action_space.shape:
-            raise ValueError(f"actions must have shape {self.action_space.shape}, got {arr.shape}")
+            hint = action_size_hint(self.config, arr.size // (b * n)) if arr.size % (b * n) == 0 else ""
+            raise ValueError(f"actions must have shape {self.action_space.shape}, got {arr.shape}{hint}")
         arr = arr.reshape(b, n, a)
         if self._needs_reset.any():  # NEXT_STEP: they start anew in this call (inside the compiled step)
             pending = np.flatnonzero(self._needs_reset)

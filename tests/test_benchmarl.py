@@ -25,7 +25,16 @@ from marine_formation_env.benchmarl import ENV_NAME, MarineFormationTask
 from marine_formation_env.errors import ConfigError
 from marine_formation_env.scenarios import make_config
 
-TASKS = ["paper_speed", "paper_guidance", "paper_force", "acoustic_speed", "ring6_speed", "survey_speed"]
+TASKS = [
+    "paper_speed",
+    "paper_guidance",
+    "paper_force",
+    "acoustic_speed",
+    "ring6_speed",
+    "survey_speed",
+    "paper_speed_budget",
+    "acoustic_speed_budget",
+]
 
 
 def _small_experiment_config(folder: Path, evaluation: bool) -> ExperimentConfig:
@@ -82,6 +91,9 @@ def test_every_task_config_builds_its_scenario_and_passes_torchrl_checks(name):
     # what BenchMARL's models see: observations apart from infos and the state
     assert set(task.observation_spec(env).keys(True, True)) == {("vessel", "observation")}
     assert ("vessel", "info", "reward_cross_track") in task.info_spec(env).keys(True, True)
+    assert ("vessel", "info", "messages_sent") in task.info_spec(env).keys(True, True)
+    # the budget tasks: a transmit entry after the speed command, budget left and age after the slots
+    assert task.action_spec(env)["vessel", "action"].shape[-1] == expected.control_dim + expected.transmit
     assert task.state_spec(env)["state"].shape == (6 * expected.n_vessels + 1,)
     env.close()
 

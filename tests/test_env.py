@@ -327,7 +327,7 @@ def test_reward_components_sum_to_reward(level):
     env = marine_formation_env.parallel_env("paper", action_level=level, horizon=10.0, reward=RewardConfig(effort=0.3))
     env.reset(seed=0)
     rng = np.random.default_rng(1)
-    names = {"cross_track", "heading", "coordination", "speed", "effort", "terminal"}
+    names = {"cross_track", "heading", "coordination", "speed", "effort", "terminal", "communication"}
     while env.agents:
         actions = {a: rng.uniform(-1, 1, ACTION_DIM[level]).astype(np.float32) for a in env.agents}
         _, rewards, _, _, infos = env.step(actions)

@@ -1,5 +1,8 @@
 """``reset()`` reports the same info keys as ``step()``, with zeros where nothing has happened yet.
 
+The message counters are the exception: the reset instant is a control instant at which the vessels
+broadcast (their first messages), and ``reset()`` reports those.
+
 Wrappers (TorchRL's ``PettingZooWrapper`` and ``GymEnv`` among them) build their
 info specs from the first ``reset()``: a key that only ``step()`` reports never
 reaches them.
@@ -13,7 +16,7 @@ import pytest
 
 import marine_formation_env
 from marine_formation_env import ENV_ID
-from marine_formation_env.core import REWARD_COMPONENTS
+from marine_formation_env.core import MESSAGE_KEYS, REWARD_COMPONENTS
 from marine_formation_env.frontend import reward_terms
 from marine_formation_env.vector import MarineFormationVectorEnv
 
@@ -30,7 +33,7 @@ def key_tree(info):
 def assert_zero(info):
     if isinstance(info, dict):
         for key, value in info.items():
-            if key != "time":
+            if key != "time" and key not in MESSAGE_KEYS:
                 assert_zero(value)
         return
     assert not np.any(info), info
@@ -48,6 +51,8 @@ def test_parallel_env_reset_infos_have_the_step_keys(level):
         assert_zero(reset_infos[agent])
         assert reset_infos[agent]["time"] == 0.0
         assert ("commanded_speed" in reset_infos[agent]) == (level != "force")
+    # acoustic TDMA: the first slot, at the reset instant, is vessel_0's
+    assert [reset_infos[agent]["messages_sent"] for agent in env.possible_agents] == [1, 0, 0]
 
 
 @pytest.mark.parametrize("level", LEVELS)
@@ -67,6 +72,8 @@ def test_vector_env_reset_infos_have_the_step_keys(level, layout):
     _, _, _, _, step_infos = env.step(env.action_space.sample())
     assert key_tree(reset_infos) == key_tree(step_infos)
     assert_zero(reset_infos)
+    sent = reset_infos["messages_sent"]  # ideal links: every vessel broadcasts at the reset instant
+    np.testing.assert_array_equal(sent, 3 if layout == "joint" else np.ones(9))
 
 
 # --------------------------------------------------------------------------- one schema, every view

@@ -56,7 +56,8 @@ def test_every_algorithm_has_one_configuration_that_differs_from_the_others_only
 
 def test_the_tasks_are_the_benchmarl_tasks_and_each_has_a_budget_in_formation_steps():
     shipped = {path.stem for path in suite.TASK_CONFIGS.glob("*.yaml")}
-    assert set(suite.TASKS) == shipped
+    assert set(suite.TASKS) | set(suite.COMMUNICATION_TASKS) == shipped
+    assert not set(suite.TASKS) & set(suite.COMMUNICATION_TASKS)
     for task in suite.TASKS.values():
         scenario, overrides = task.scenario()
         assert isinstance(task.budget, int) and task.budget > 0

@@ -1,0 +1,282 @@
+"""Communication as a resource: the paper's controller, broadcasting periodically or on events, on a Pareto plot.
+
+For each link preset (``paper``'s ideal links, ``radio``, ``acoustic``) the
+extrapolating reference (``ReferencePolicy(extrapolate=True)``, the variant
+that predicts each neighbour from its last message, as the event trigger
+assumes) runs with
+
+* **periodic** broadcasting at every k-th opportunity (k = 1: the channel's
+  own schedule; k > 1: ``event_threshold = inf`` with a heartbeat of k
+  opportunity periods), and
+* **event-triggered** broadcasting at thresholds δ (``event_threshold``,
+  τ_min = dt, no heartbeat),
+
+and each point records the mean return, final spread, settling time (the
+horizon when an episode never settles), success and messages per vessel per
+second. The target: at a return within 2 % of periodic broadcasting's (k = 1),
+event triggering sends at most a third of its messages.
+
+For each budget preset (``paper_budget``, ``acoustic_budget``) the reference
+broadcasts periodically into the budget and event-triggered at each δ; the
+δ with the best mean return on the development seeds is the **reference
+tuned to the budget**, reported on the benchmark seeds beside periodic
+broadcasting. Every other point runs on the benchmark seeds
+(``baselines.seeds``), each episode from a random start
+(``GENERATED_INIT_NOISE``, as the benchmark's tasks)::
+
+    python -m benchmarks.communication --out docs/communication
+    python -m benchmarks.communication --quick --out /tmp/communication
+
+Writes ``OUT.json`` (with provenance), ``OUT.md`` (the tables) and ``OUT.png``
+(return, final spread and settling time against messages per vessel per second).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from baselines.engine import episode_reports
+from baselines.evaluate import progress_bar
+from baselines.plots import save_figure, write_report
+from baselines.reference import ReferencePolicy
+from baselines.seeds import benchmark_seeds, development_seeds
+from marine_formation_env.atomic import check_writable
+from marine_formation_env.cli import ArgumentParser, int_at_least
+from marine_formation_env.provenance import command_line
+from marine_formation_env.render import require_matplotlib
+from marine_formation_env.scenarios import GENERATED_INIT_NOISE, ScenarioConfig, make_config
+
+__all__ = [
+    "BUDGETS",
+    "EVERY",
+    "LINKS",
+    "THRESHOLDS",
+    "budget_references",
+    "main",
+    "opportunity_period",
+    "point",
+    "sweep",
+]
+
+#: The link presets of the Pareto sweep, and the budget presets.
+LINKS = ("paper", "radio", "acoustic")
+BUDGETS = ("paper_budget", "acoustic_budget")
+#: Event thresholds δ [m, m/s] and periodic broadcasting every k-th opportunity.
+THRESHOLDS = (0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 4.0)
+EVERY = (1, 2, 4, 8, 16)
+EPISODES = 20
+#: Return within this share of periodic broadcasting's counts as equal (the target's).
+EQUAL_RETURN = 0.02
+#: ``--quick``: episodes, horizon [s], thresholds, every.
+QUICK = (2, 20.0, (0.5, 2.0), (1, 4))
+
+
+def opportunity_period(config: ScenarioConfig) -> float:
+    """Seconds between two opportunities of a vessel to broadcast: ``n·tdma_slot`` with TDMA, else the
+    channel's period (or dt)."""
+    ch = config.channel
+    if ch.tdma_slot is not None:
+        return float(config.n_vessels * ch.tdma_slot)
+    return float(config.dt if ch.period is None else ch.period)
+
+
+def _config(scenario: str, channel: dict[str, Any], horizon: float | None) -> ScenarioConfig:
+    extra = {} if horizon is None else {"horizon": horizon}
+    return make_config(scenario, action_level="speed", init_noise=GENERATED_INIT_NOISE, channel=channel, **extra)
+
+
+def point(scenario: str, channel: dict[str, Any], seeds: Sequence[int], horizon: float | None = None) -> dict[str, Any]:
+    """The extrapolating reference on ``scenario`` with the ``channel`` overrides: its means over ``seeds``."""
+    cfg = _config(scenario, channel, horizon)
+    metrics, _ = episode_reports(ReferencePolicy(cfg, extrapolate=True), cfg, seeds)
+    settle = [cfg.horizon if m["settling_time"] is None else m["settling_time"] for m in metrics]
+    return {
+        "channel": {key: "inf" if value == math.inf else value for key, value in channel.items()},
+        "return": float(np.mean([m["return"] for m in metrics])),
+        "return_std": float(np.std([m["return"] for m in metrics])),
+        "final_spread": float(np.mean([m["final_coordination_spread"] for m in metrics])),
+        "settling_time": float(np.mean(settle)),
+        "success": float(np.mean([m["success"] for m in metrics])),
+        "message_rate": float(np.mean([m["message_rate"] for m in metrics])),
+    }
+
+
+def _periodic(scenario: str, k: int, horizon: float | None) -> dict[str, Any]:
+    """The channel overrides of broadcasting at every k-th opportunity."""
+    if k == 1:
+        return {}
+    return {"event_threshold": math.inf, "heartbeat": k * opportunity_period(_config(scenario, {}, horizon))}
+
+
+def sweep(
+    links: Sequence[str],
+    thresholds: Sequence[float],
+    every: Sequence[int],
+    episodes: int,
+    horizon: float | None = None,
+    bar: Any = None,
+) -> dict[str, Any]:
+    """Per link preset: the periodic and event-triggered points (``point``) and the target's numbers."""
+    seeds = benchmark_seeds(episodes)
+    out: dict[str, Any] = {}
+    for link in links:
+        periodic = []
+        for k in every:
+            periodic.append({"every": k, **point(link, _periodic(link, k, horizon), seeds, horizon)})
+            _tick(bar)
+        event = []
+        for delta in thresholds:
+            event.append({"threshold": delta, **point(link, {"event_threshold": delta}, seeds, horizon)})
+            _tick(bar)
+        out[link] = {"periodic": periodic, "event": event, "target": _target(periodic, event)}
+    return out
+
+
+def _target(periodic: list[dict[str, Any]], event: list[dict[str, Any]]) -> dict[str, Any]:
+    """The fewest messages event triggering sends at a return within ``EQUAL_RETURN`` of broadcasting at
+    every opportunity, as a share of that one's."""
+    base = next((p for p in periodic if p["every"] == 1), None)
+    if base is None:
+        return {}
+    equal = [e for e in event if abs(e["return"] - base["return"]) <= EQUAL_RETURN * abs(base["return"])]
+    if not equal:
+        return {"periodic_rate": base["message_rate"], "threshold": None, "share": None}
+    best = min(equal, key=lambda e: e["message_rate"])
+    return {"periodic_rate": base["message_rate"], "threshold": best["threshold"], "event_rate": best["message_rate"],
+            "share": best["message_rate"] / base["message_rate"]}  # fmt: skip
+
+
+def budget_references(
+    budgets: Sequence[str], thresholds: Sequence[float], episodes: int, horizon: float | None = None, bar: Any = None
+) -> dict[str, Any]:
+    """Per budget preset: periodic broadcasting into the budget, and the event-triggered reference whose δ
+    returns most on the development seeds, both on the benchmark seeds."""
+    out: dict[str, Any] = {}
+    for preset in budgets:
+        tuning = []
+        for delta in thresholds:
+            tuning.append({"threshold": delta, **point(preset, {"event_threshold": delta}, development_seeds(episodes),
+                                                       horizon)})  # fmt: skip
+            _tick(bar)
+        best = max(tuning, key=lambda e: e["return"])["threshold"]
+        seeds = benchmark_seeds(episodes)
+        out[preset] = {
+            "tuning": tuning,
+            "periodic": point(preset, {}, seeds, horizon),
+            "tuned": {"threshold": best, **point(preset, {"event_threshold": best}, seeds, horizon)},
+        }
+        _tick(bar, 2)
+    return out
+
+
+def _tick(bar: Any, n: int = 1) -> None:
+    if bar is not None:
+        bar.update(n)
+
+
+# ----------------------------------------------------------------------------- report
+
+
+def _row(label: str, p: dict[str, Any]) -> str:
+    return (f"| {label} | {p['message_rate']:.3g} | {p['return']:.2f} ± {p['return_std']:.2f} | "
+            f"{p['final_spread']:.3g} | {p['settling_time']:.0f} | {p['success']:.0%} |")  # fmt: skip
+
+
+HEADER = ("| broadcasting | messages / vessel / s | return | final spread [m] | settling [s] | success |\n"
+          "|---|---|---|---|---|---|")  # fmt: skip
+
+
+def format_markdown(report: dict[str, Any]) -> str:
+    """The sweep's tables (one per link preset, then the budgets) and each preset's target line."""
+    lines = [f"{report['episodes']} episodes per point on the benchmark seeds, random starts; the extrapolating "
+             "reference. Settling: the horizon when an episode never settles.\n"]  # fmt: skip
+    for link, result in report["links"].items():
+        lines += [f"### {link}\n", HEADER]
+        lines += [_row("periodic" if p["every"] == 1 else f"every {p['every']}th opportunity", p)
+                  for p in result["periodic"]]  # fmt: skip
+        lines += [_row(f"event δ = {e['threshold']:g}", e) for e in result["event"]]
+        target = result["target"]
+        if target.get("share") is not None:
+            lines.append(
+                f"\nAt a return within {EQUAL_RETURN:.0%} of periodic broadcasting's, event triggering "
+                f"(δ = {target['threshold']:g}) sends {target['share']:.1%} of its messages "
+                f"({target['event_rate']:.3g} against {target['periodic_rate']:.3g} per vessel per s).\n"
+            )
+        elif target:
+            lines.append(f"\nNo threshold returns within {EQUAL_RETURN:.0%} of periodic broadcasting.\n")
+    for preset, result in report.get("budgets", {}).items():
+        lines += [f"### {preset}: the reference tuned to the budget\n", HEADER]
+        lines.append(_row("periodic, into the budget", result["periodic"]))
+        lines.append(_row(f"event δ = {result['tuned']['threshold']:g} (tuned on the development seeds)",
+                          result["tuned"]))  # fmt: skip
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def plot_pareto(report: dict[str, Any], path: Path) -> None:
+    """Return, final spread and settling time against messages per vessel per second (log scale)."""
+    require_matplotlib()
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(15, 4.6), layout="constrained")
+    axes = fig.subplots(1, 3)
+    colors = dict(zip(report["links"], ("tab:blue", "tab:orange", "tab:green"), strict=False))
+    budget_colors = {"paper_budget": "tab:blue", "acoustic_budget": "tab:green"}
+    for ax, key, label in zip(axes, ("return", "final_spread", "settling_time"),
+                              ("mean return", "final spread [m]", "settling time [s]"), strict=True):  # fmt: skip
+        for link, result in report["links"].items():
+            for mode, style, points in (("periodic", "s--", result["periodic"]), ("event", "o-", result["event"])):
+                pts = sorted(points, key=lambda p: p["message_rate"])
+                ax.plot([p["message_rate"] for p in pts], [p[key] for p in pts], style, color=colors[link],
+                        label=f"{link}, {mode}", alpha=0.85, markersize=5)  # fmt: skip
+        for preset, result in report.get("budgets", {}).items():
+            tuned = result["tuned"]
+            ax.plot(tuned["message_rate"], tuned[key], "*", color=budget_colors.get(preset, "k"), markersize=13,
+                    markeredgecolor="k", label=f"{preset}: reference tuned to the budget")  # fmt: skip
+        ax.set_xscale("log")
+        ax.set_xlabel("messages per vessel per second")
+        ax.set_ylabel(label)
+        if key == "final_spread":
+            ax.set_yscale("symlog", linthresh=0.01)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("The paper's controller (extrapolating): periodic and event-triggered broadcasting")
+    save_figure(fig, path)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    prog = "python -m benchmarks.communication"
+    parser = ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", type=Path, required=True, help="write OUT.json, OUT.md and OUT.png")
+    parser.add_argument("--episodes", type=int_at_least(1), default=EPISODES)
+    parser.add_argument("--quick", action="store_true", help="2 episodes of 20 s, two thresholds: the pipeline")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    for suffix in (".json", ".md", ".png"):
+        try:
+            check_writable(args.out.with_suffix(suffix), "--out")
+        except ValueError as err:
+            parser.error(str(err))
+    episodes, horizon, thresholds, every = (args.episodes, None, THRESHOLDS, EVERY) if not args.quick else QUICK
+    total = len(LINKS) * (len(thresholds) + len(every)) + len(BUDGETS) * (len(thresholds) + 2)
+    bar = progress_bar(total, not args.quiet, desc="points")
+    report: dict[str, Any] = {
+        "episodes": episodes,
+        "links": sweep(LINKS, thresholds, every, episodes, horizon, bar),
+        "budgets": budget_references(BUDGETS, thresholds, episodes, horizon, bar),
+    }
+    if bar is not None:
+        bar.close()
+    markdown = format_markdown(report)
+    print(markdown)
+    write_report(args.out, report, markdown, plot_pareto, command_line(prog, argv))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
