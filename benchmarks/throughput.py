@@ -16,6 +16,10 @@ Cases (random actions, 3 agents, ``force`` level, default scenario settings):
   same B: env-steps/s (formation-steps: B per call).
 * ``acoustic``, ``radio``: the same two cases with those presets' channels
   (the observations through lossy, delayed TDMA links);
+* ``traffic``: the batched env at each B with event-triggered broadcasting
+  (``paper``, δ = 0.5), a bandwidth budget (``paper_budget``) and both over
+  the acoustic channel (``acoustic_budget``, δ = 0.5), against its ideal links
+  in the same run (``--traffic`` runs this case alone);
 * ``scaling``: the batched env at B = 256 for n = 3, 8, 20, 50 vessels on a
   random sparse digraph, with ideal links and the ``acoustic`` channel:
   env-steps/s, vessel-steps/s, and the exponent of the cost's growth with n;
@@ -285,6 +289,9 @@ def run_case(case: str, b: int, min_seconds: float, repeats: int) -> dict[str, A
             out = _jaxmarl_batched(b, min_seconds, repeats, scan=True)
         elif case == "jaxmarl_step_batched":
             out = _jaxmarl_batched(b, min_seconds, repeats, scan=False)
+        elif case.startswith("traffic_"):
+            scenario, overrides = TRAFFIC[case.removeprefix("traffic_")]
+            out = _ours_batched(b, min_seconds, repeats, scenario=scenario, **overrides)
         elif case.startswith(("scaling_ideal_", "scaling_acoustic_")):
             scenario, n = ("acoustic" if "acoustic" in case else "paper"), int(case.rsplit("_", 1)[1])
             out = _ours_batched(b, min_seconds, repeats, scenario=scenario, n_vessels=n, topology="random")
@@ -366,6 +373,29 @@ def elementwise_peak(seconds: float = 0.5) -> float:
 #: Team sizes of the scaling case, and its number of formations.
 TEAM_SIZES = (3, 8, 20, 50)
 SCALING_B = 256
+
+
+#: The ``traffic`` cases: (scenario, overrides); ``ideal`` is the paper's links, the reference of the ratios.
+TRAFFIC: dict[str, tuple[str, dict[str, Any]]] = {
+    "ideal": ("paper", {}),
+    "event": ("paper", {"channel": {"event_threshold": 0.5}}),
+    "budget": ("paper_budget", {}),
+    "acoustic_event_budget": ("acoustic_budget", {"channel": {"event_threshold": 0.5}}),
+}
+
+
+def traffic_throughput(batch_sizes: Sequence[int], min_seconds: float, repeats: int) -> dict[str, Any]:
+    """env-steps/s of the batched env with event triggering and budgets (``TRAFFIC``) at each B, each case in
+    its own subprocess, and each rate over the ideal links' of the same run (``over_ideal``)."""
+    out: dict[str, Any] = {}
+    for b in batch_sizes:
+        row = {name: _subprocess_case(f"traffic_{name}", b, min_seconds, repeats) for name in TRAFFIC}
+        ideal = row["ideal"].get("env_steps_per_s")
+        for entry in row.values():
+            if ideal and "env_steps_per_s" in entry:
+                entry["over_ideal"] = entry["env_steps_per_s"] / ideal
+        out[str(b)] = row
+    return out
 
 
 def team_size_scaling(min_seconds: float, repeats: int, sizes: Sequence[int] = TEAM_SIZES) -> dict[str, Any]:
@@ -480,6 +510,7 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
             "jaxmarl_scan": _subprocess_case("jaxmarl_scan_batched", b, min_seconds, repeats),
             "jaxmarl_step": _subprocess_case("jaxmarl_step_batched", b, min_seconds, repeats),
         }
+    report["traffic"] = traffic_throughput(batch_sizes, min_seconds, repeats)
     report["scaling"] = team_size_scaling(min_seconds, repeats)
     report["first_step_seconds"] = first_step_latency()
     ops = count_vessel_step_ops("force")
@@ -499,16 +530,44 @@ def run_benchmark(batch_sizes: Sequence[int], min_seconds: float, repeats: int) 
     return report
 
 
+def _rate(entry: dict[str, Any], key: str) -> str:
+    """The median rate and, in brackets, the slowest and fastest repeat."""
+    if key not in entry:
+        return f"n/a ({entry.get('unavailable', '?')})"
+    scale = entry[key] / entry["steps_per_s"]  # env-steps per step (B), or 1
+    low, high = entry["spread"]["min"] * scale, entry["spread"]["max"] * scale
+    return f"{entry[key]:,.0f} [{low:,.0f}–{high:,.0f}]"
+
+
+def format_traffic(report: dict[str, Any]) -> list[str]:
+    """The ``traffic`` case's table (none without it)."""
+    traffic = report.get("traffic")
+    if not traffic:
+        return []
+    names = [name for name in TRAFFIC if name != "ideal"]
+    lines = [
+        "",
+        "Event-triggered broadcasting and budgets (random force actions; `/ ideal`: over the ideal links of the "
+        "same run): `event` is `paper` with δ = 0.5, `budget` is `paper_budget`, `acoustic_event_budget` is "
+        "`acoustic_budget` with δ = 0.5:",
+        "",
+        "| B | ideal links [env-steps/s] | " + " | ".join(f"{n} [env-steps/s] | {n} / ideal" for n in names) + " |",
+        "|---|---|" + "---|---|" * len(names),
+    ]
+    for b, row in traffic.items():
+        cells = []
+        for name in names:
+            entry = row[name]
+            over = f"{entry['over_ideal']:.2f}" if "over_ideal" in entry else "n/a"
+            cells.append(f"{_rate(entry, 'env_steps_per_s')} | {over}")
+        lines.append(f"| {b} | {_rate(row['ideal'], 'env_steps_per_s')} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def format_report(report: dict[str, Any]) -> str:
     """The report as a Markdown table."""
 
-    def rate(entry: dict[str, Any], key: str) -> str:
-        """The median rate and, in brackets, the slowest and fastest repeat."""
-        if key not in entry:
-            return f"n/a ({entry.get('unavailable', '?')})"
-        scale = entry[key] / entry["steps_per_s"]  # env-steps per step (B), or 1
-        low, high = entry["spread"]["min"] * scale, entry["spread"]["max"] * scale
-        return f"{entry[key]:,.0f} [{low:,.0f}–{high:,.0f}]"
+    rate = _rate
 
     def mem(entry: dict[str, Any]) -> str:
         return f"{entry['max_rss_mb']:.0f}" if "max_rss_mb" in entry else "n/a"
@@ -567,6 +626,7 @@ def format_report(report: dict[str, Any]) -> str:
             f"{ratio(acoustic, ours['ours'], key)} | {ratio(acoustic, peer, key)} | {rate(radio, key)} | "
             f"{ratio(radio, ours['ours'], key)} | {ratio(radio, peer, key)} |"
         )
+    lines += format_traffic(report)
     scaling = report.get("scaling")
     if scaling:
         lines += [
@@ -628,6 +688,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="B = 1, 64 only, 0.5 s × 3 repeats")
     parser.add_argument("--json", type=Path, default=Path("results/throughput.json"))
     parser.add_argument("--format", type=Path, metavar="JSON", help="only print the tables of a saved report")
+    parser.add_argument("--traffic", action="store_true", help="only the traffic case (event triggering, budgets)")
     args = parser.parse_args(argv)
     if args.format:
         try:
@@ -642,10 +703,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.quick:
         args.batch_sizes, args.seconds, args.repeats = [1, 64], 0.5, 3
     path = check_writable(args.json, "--json")
-    report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
+    if args.traffic:
+        report = {"traffic": traffic_throughput(args.batch_sizes, args.seconds, args.repeats)}
+    else:
+        report = run_benchmark(args.batch_sizes, args.seconds, args.repeats)
     report["provenance"] = provenance(command_line("python -m benchmarks.throughput", argv))
     atomic_write_text(path, json.dumps(report, indent=2))  # first: the measurements outlive a formatting error
-    print(format_report(report))
+    print("\n".join(format_traffic(report)).strip() if args.traffic else format_report(report))
     print(f"\nwritten {args.json}")
     return 0
 

@@ -11,6 +11,7 @@ by the ``trainer`` field of its ``config.yaml``.
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import zipfile
 from pathlib import Path
@@ -220,9 +221,15 @@ def member_metrics(policies: dict[str, Any], config: Any, seeds: list[int]) -> d
 
 def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], seeds: list[int]) -> dict[str, Any]:
     """``policy`` and the reference on ``seeds`` of the scenario (``member_metrics``), flat: the mean return
-    and success of each, the per-episode returns and the mean action change per step."""
-    env = parallel_env(scenario, **env_kwargs)
-    members = member_metrics({"learned": policy, "reference": ReferencePolicy(env)}, env.config, seeds)
+    and success of each, the per-episode returns and the mean action change per step. Where the policy
+    decides when to broadcast (``transmit``), the reference broadcasts by the channel's rule."""
+    config = parallel_env(scenario, **env_kwargs).config
+    # where the policy decides when to broadcast, the reference broadcasts by the channel's rule
+    periodic = dataclasses.replace(config, transmit=False) if config.transmit else config
+    members = {
+        **member_metrics({"learned": policy}, config, seeds),
+        **member_metrics({"reference": ReferencePolicy(periodic)}, periodic, seeds),
+    }
     return {f"{m}_{key}": members[m][key] for m in members for key in ("return", "success", "returns", "action_change")}
 
 
