@@ -22,12 +22,17 @@ For each budget preset (``paper_budget``, ``acoustic_budget``) the reference
 broadcasts periodically into the budget and event-triggered at each δ; the
 δ with the best mean return on the development seeds is the **reference
 tuned to the budget**, reported on the benchmark seeds beside periodic
-broadcasting. Every other point runs on the benchmark seeds
+broadcasting. ``--learned PRESET=RUN,RUN,...`` adds policies trained with the
+``transmit`` action on the preset (one run folder per training seed): each
+seed's mean return, success and messages, and their mean and spread over
+the seeds. Every other point runs on the benchmark seeds
 (``baselines.seeds``), each episode from a random start
 (``GENERATED_INIT_NOISE``, as the benchmark's tasks)::
 
     python -m benchmarks.communication --out docs/communication
     python -m benchmarks.communication --quick --out /tmp/communication
+    python -m benchmarks.communication --out docs/communication \\
+        --learned paper_budget=runs/budget/paper_s0,runs/budget/paper_s1,runs/budget/paper_s2
 
 Writes ``OUT.json`` (with provenance), ``OUT.md`` (the tables) and ``OUT.png``
 (return, final spread and settling time against messages per vessel per second).
@@ -46,10 +51,11 @@ from baselines.engine import episode_reports
 from baselines.evaluate import progress_bar
 from baselines.plots import save_figure, write_report
 from baselines.reference import ReferencePolicy
+from baselines.runs import load_run
 from baselines.seeds import benchmark_seeds, development_seeds
 from marine_formation_env.atomic import check_writable
 from marine_formation_env.cli import ArgumentParser, int_at_least
-from marine_formation_env.provenance import command_line
+from marine_formation_env.provenance import command_line, provenance
 from marine_formation_env.render import require_matplotlib
 from marine_formation_env.scenarios import GENERATED_INIT_NOISE, ScenarioConfig, make_config
 
@@ -97,7 +103,22 @@ def _config(scenario: str, channel: dict[str, Any], horizon: float | None) -> Sc
 def point(scenario: str, channel: dict[str, Any], seeds: Sequence[int], horizon: float | None = None) -> dict[str, Any]:
     """The extrapolating reference on ``scenario`` with the ``channel`` overrides: its means over ``seeds``."""
     cfg = _config(scenario, channel, horizon)
-    metrics, _ = episode_reports(ReferencePolicy(cfg, extrapolate=True), cfg, seeds)
+    return _summary(ReferencePolicy(cfg, extrapolate=True), cfg, seeds, channel)
+
+
+def learned_point(run: str, preset: str, seeds: Sequence[int], horizon: float | None = None) -> dict[str, Any]:
+    """A policy trained with the ``transmit`` action on ``preset`` (its run folder) on ``seeds``."""
+    policy, config = load_run(run)
+    if config["scenario"] != preset or not config["env_kwargs"].get("transmit"):
+        raise ValueError(f"run {run!r} was trained on {config['scenario']!r} (transmit "
+                         f"{bool(config['env_kwargs'].get('transmit'))}), not on {preset!r} with transmit")  # fmt: skip
+    extra = {} if horizon is None else {"horizon": horizon}
+    cfg = make_config(preset, **{**config["env_kwargs"], "init_noise": GENERATED_INIT_NOISE, **extra})
+    return {"run": run, **_summary(policy, cfg, seeds, {})}
+
+
+def _summary(policy: Any, cfg: ScenarioConfig, seeds: Sequence[int], channel: dict[str, Any]) -> dict[str, Any]:
+    metrics, _ = episode_reports(policy, cfg, seeds)
     settle = [cfg.horizon if m["settling_time"] is None else m["settling_time"] for m in metrics]
     return {
         "channel": {key: "inf" if value == math.inf else value for key, value in channel.items()},
@@ -201,6 +222,22 @@ def _channel_of(point: dict[str, Any]) -> dict[str, Any]:
     return {key: math.inf if value == "inf" else value for key, value in point["channel"].items()}
 
 
+def learned_rows(learned: dict[str, list[str]], episodes: int, horizon: float | None, bar: Any) -> dict[str, Any]:
+    """Per budget preset, each run's ``learned_point`` on the benchmark seeds and the mean and sample std over
+    the runs (the training seeds) of its return, success and messages per vessel per second."""
+    out: dict[str, Any] = {}
+    for preset, runs in learned.items():
+        points = []
+        for run in runs:
+            points.append(learned_point(run, preset, benchmark_seeds(episodes), horizon))
+            _tick(bar)
+        summary = {key: {"mean": float(np.mean([p[key] for p in points])),
+                         "std": float(np.std([p[key] for p in points], ddof=1)) if len(points) > 1 else 0.0}
+                   for key in ("return", "success", "message_rate", "final_spread")}  # fmt: skip
+        out[preset] = {"runs": points, "over_seeds": summary}
+    return out
+
+
 def _tick(bar: Any, n: int = 1) -> None:
     if bar is not None:
         bar.update(n)
@@ -220,11 +257,15 @@ HEADER = ("| broadcasting | messages / vessel / s | return | final spread [m] | 
 
 def format_markdown(report: dict[str, Any]) -> str:
     """The sweep's tables (one per link preset, then the budgets) and each preset's target line."""
-    lines = [f"{report['episodes']} episodes per point on the benchmark seeds, random starts; the extrapolating "
-             "reference. Settling: the horizon when an episode never settles.\n"]  # fmt: skip
+    lines = ["# Communication: periodic and event-triggered broadcasting\n",
+             f"`{report['provenance']['command']}`\n" if "provenance" in report else "",
+             f"{report['episodes']} episodes per point on the benchmark seeds, random starts; the extrapolating "
+             "reference. Settling: the horizon when an episode never settles. What each setting means: "
+             "[channel.md](channel.md#communication-as-a-resource).\n",
+             "![Pareto plot](communication.png)\n"]  # fmt: skip
     for link, result in report["links"].items():
         lines += [f"### {link}\n", HEADER]
-        lines += [_row("periodic" if p["every"] == 1 else f"every {p['every']}th opportunity", p)
+        lines += [_row("periodic" if p["every"] == 1 else f"periodic, 1 in {p['every']} opportunities", p)
                   for p in result["periodic"]]  # fmt: skip
         lines += [_row(_event_label(e), e) for e in result["event"]]
         target = result["target"]
@@ -244,6 +285,17 @@ def format_markdown(report: dict[str, Any]) -> str:
         lines += [f"### {preset}: the reference tuned to the budget\n", HEADER]
         lines.append(_row("periodic, into the budget", result["periodic"]))
         lines.append(_row(f"{_event_label(result['tuned'])} (tuned on the development seeds)", result["tuned"]))
+        learned = report.get("learned", {}).get(preset)
+        if learned:
+            for k, p in enumerate(learned["runs"]):
+                lines.append(_row(f"learned, transmit action, training seed {k} (`{p['run']}`)", p))
+            m = learned["over_seeds"]
+            lines.append(
+                f"\nLearned, over {len(learned['runs'])} training seeds (mean ± sample std): return "
+                f"{m['return']['mean']:.2f} ± {m['return']['std']:.2f}, {m['message_rate']['mean']:.3g} ± "
+                f"{m['message_rate']['std']:.2g} messages per vessel per s, success {m['success']['mean']:.0%}, "
+                f"final spread {m['final_spread']['mean']:.3g} m."
+            )
         lines.append("")
     return "\n".join(lines) + "\n"
 
@@ -260,7 +312,10 @@ def plot_pareto(report: dict[str, Any], path: Path) -> None:
     for ax, key, label in zip(axes, ("return", "final_spread", "settling_time"),
                               ("mean return", "final spread [m]", "settling time [s]"), strict=True):  # fmt: skip
         for link, result in report["links"].items():
-            for mode, style, points in (("periodic", "s--", result["periodic"]), ("event", "o-", result["event"])):
+            beats = [e for e in result["event"] if "heartbeat" in e["channel"]]
+            plain = [e for e in result["event"] if "heartbeat" not in e["channel"]]
+            for mode, style, points in (("periodic", "s--", result["periodic"]), ("event", "o-", plain),
+                                        (f"event, heartbeat {HEARTBEAT} opportunities", "^:", beats)):  # fmt: skip
                 pts = sorted(points, key=lambda p: p["message_rate"])
                 ax.plot([p["message_rate"] for p in pts], [p[key] for p in pts], style, color=colors[link],
                         label=f"{link}, {mode}", alpha=0.85, markersize=5)  # fmt: skip
@@ -268,11 +323,17 @@ def plot_pareto(report: dict[str, Any], path: Path) -> None:
             tuned = result["tuned"]
             ax.plot(tuned["message_rate"], tuned[key], "*", color=budget_colors.get(preset, "k"), markersize=13,
                     markeredgecolor="k", label=f"{preset}: reference tuned to the budget")  # fmt: skip
+        for preset, learned in report.get("learned", {}).items():
+            runs = learned["runs"]
+            ax.plot([p["message_rate"] for p in runs], [p[key] for p in runs], "P", markersize=10,
+                    color=budget_colors.get(preset, "k"), markeredgecolor="k",
+                    label=f"{preset}: learned, transmit action (each training seed)")  # fmt: skip
         ax.set_xscale("log")
         ax.set_xlabel("messages per vessel per second")
         ax.set_ylabel(label)
         if key == "final_spread":
-            ax.set_yscale("symlog", linthresh=0.01)
+            ax.set_yscale("symlog", linthresh=1e-3)
+            ax.set_ylim(bottom=0.0)
         ax.grid(True, which="both", alpha=0.3)
     axes[0].legend(fontsize=7)
     fig.suptitle("The paper's controller (extrapolating): periodic and event-triggered broadcasting")
@@ -286,25 +347,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int_at_least(1), default=EPISODES)
     parser.add_argument("--quick", action="store_true", help="2 episodes of 20 s, two thresholds: the pipeline")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--learned",
+        action="append",
+        default=[],
+        metavar="PRESET=RUN,RUN",
+        help="run folders of policies trained with the transmit action on a budget preset, one per training seed",
+    )
     args = parser.parse_args(argv)
     for suffix in (".json", ".md", ".png"):
         try:
             check_writable(args.out.with_suffix(suffix), "--out")
         except ValueError as err:
             parser.error(str(err))
+    learned: dict[str, list[str]] = {}
+    for item in args.learned:
+        preset, eq, runs = item.partition("=")
+        if preset not in BUDGETS or not eq or not runs:
+            parser.error(f"--learned {item!r}: expected PRESET=RUN[,RUN...] with PRESET one of {list(BUDGETS)}")
+        learned[preset] = [run for run in runs.split(",") if run]
     episodes, horizon, thresholds, every = (args.episodes, None, THRESHOLDS, EVERY) if not args.quick else QUICK
     total = len(LINKS) * (2 * len(thresholds) + len(every)) + len(BUDGETS) * (2 * len(thresholds) + 2)
+    total += sum(len(runs) for runs in learned.values())
     bar = progress_bar(total, not args.quiet, desc="points")
     report: dict[str, Any] = {
         "episodes": episodes,
         "links": sweep(LINKS, thresholds, every, episodes, horizon, bar),
         "budgets": budget_references(BUDGETS, thresholds, episodes, horizon, bar),
     }
+    try:
+        report["learned"] = learned_rows(learned, episodes, horizon, bar)
+    except (ValueError, OSError) as err:
+        parser.error(str(err))
     if bar is not None:
         bar.close()
+    report["provenance"] = provenance(command_line(prog, argv))
     markdown = format_markdown(report)
     print(markdown)
-    write_report(args.out, report, markdown, plot_pareto, command_line(prog, argv))
+    write_report(args.out, report, markdown, plot_pareto, report["provenance"]["command"])
     return 0
 
 

@@ -76,6 +76,12 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     2 rad/s² (the paper's gains need up to 2.43 m/s² and 1.82 rad/s² in the
     `paper` scenario), psi_max = π/2.
 
+    With ``transmit=True`` each vessel also decides when it broadcasts: its
+    action gets one more, last entry, ``transmit`` (> 0: broadcast at this
+    control period, combined with the channel's schedule and budget; see
+    "Communication channel"), so ``A`` grows by one. A policy that sends only
+    the level's entries is refused with a message that says so.
+
     ## Observation Space
 
     ``Box(low, high, (10 + 4·(n−1),), float32)`` per agent; own quantities
@@ -125,6 +131,11 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     trains on several team sizes in one batch and runs on a larger team
     without padding; the default, M = n − 1, is the layout above.
 
+    With ``transmit=True`` the observation ends with two more entries: the share
+    of the vessel's token bucket left (in [0, 1]; 1 without a budget) and the
+    time since its last broadcast, or since reset before the first [s, 0 to
+    horizon]; the space is ``(10 + 4·M + 2,)``.
+
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
     ``(x_i, ẋ_i)`` (docs/model.md §3), given relative to ``j``. ``state()`` returns the
     global state ``(n·6 + 1,)``: every vessel's ``x, y, ψ (wrapped), u, v, r``
@@ -147,6 +158,21 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     "Presets"). The channel draws from its own stream, seeded with
     the reset seed (or ``options={"channel_seed": k}``). With the defaults
     nothing of this runs.
+
+    Communication is a resource the env counts, budgets and lets agents decide
+    on (docs/channel.md, "Communication as a resource"). Every message is
+    counted per vessel and control instant: ``infos[agent]`` holds
+    ``messages_attempted``, ``messages_sent``, ``messages_delivered``,
+    ``messages_dropped_loss``, ``messages_dropped_range``,
+    ``messages_dropped_schedule``, ``messages_dropped_budget`` and
+    ``bits_sent`` (``channel.message_bits`` per message, 96 by default), the
+    reset instant's in ``reset()``'s infos. ``channel={"event_threshold": δ}``
+    broadcasts on events: a vessel sends when its neighbours' prediction of it
+    from its last broadcast is off by δ (``min_interval`` τ_min apart at least,
+    a ``heartbeat`` T_max at most); δ = 0 is periodic broadcasting exactly.
+    ``channel={"budget_rate": …, "budget_burst": …}`` gives each vessel a token
+    bucket [bit/s, bit]; the presets ``paper_budget`` and ``acoustic_budget``
+    set budgets that periodic broadcasting exceeds several times over.
 
     ## Paths
 
@@ -201,8 +227,10 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     ``−(Σ weights)·(horizon − t)``, the worst the remaining episode could give,
     so ending an episode never pays. ``infos[agent]`` holds every term as
     ``reward_cross_track``, ``reward_heading``, ``reward_coordination``,
-    ``reward_speed``, ``reward_effort``, ``reward_terminal``; they sum to the
-    reward. A return near 0 is perfect.
+    ``reward_speed``, ``reward_effort``, ``reward_terminal`` and
+    ``reward_communication`` (``−message_cost`` per broadcast the vessel sends;
+    ``message_cost`` is 0 by default); they sum to the reward. A return near 0
+    is perfect.
 
     ## Starting State
 
@@ -270,6 +298,7 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     | `path`             | `"straight"`         | `Path`, kind name or mapping with `kind` ("Paths")         |
     | `corridor`         | derived (curved)     | largest abs(e_j) [m] on a curved path before termination |
     | `observation_slots`| n − 1                | slots per observation; more pad with empty ones           |
+    | `transmit`         | False                | each vessel's policy decides when it broadcasts          |
 
     A mapping given for a nested setting updates the scenario's value field
     by field: ``parallel_env("acoustic", channel={"latency": 3.0})`` keeps the
