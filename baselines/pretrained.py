@@ -389,6 +389,13 @@ def check_compatible(info: PretrainedInfo, config: ScenarioConfig, observation_d
             f"{where}) acts at action_level {info.action_level!r}, this scenario has {config.action_level!r}; "
             f"pass --set action_level={info.action_level}"
         )
+    trained_transmit = bool(info.env_kwargs.get("transmit", False))
+    if trained_transmit != config.transmit:
+        sends = "sends" if trained_transmit else "does not send"
+        raise ValueError(
+            f"{where}) {sends} the transmit action, this scenario has transmit={config.transmit}; "
+            f"pass --set transmit={trained_transmit}"
+        )
     if info.n_vessels is not None and info.n_vessels != config.n_vessels:
         raise ValueError(
             f"{where}) takes teams of {info.n_vessels} vessels, this scenario has n_vessels = {config.n_vessels}"

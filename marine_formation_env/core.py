@@ -109,7 +109,7 @@ from marine_formation_env.scenarios import ScenarioConfig, min_separation
 from marine_formation_env.settings import TRACKING_TERMS
 from marine_formation_env.streams import channel_streams
 
-__all__ = ["MESSAGE_KEYS", "REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output"]
+__all__ = ["MESSAGE_KEYS", "REWARD_COMPONENTS", "FormationCore", "StepOutput", "reset_output", "vessel_totals"]
 
 #: Appended to a wrong-shape message of a state array.
 COLUMNS_HINT = " (columns x, y, psi, u, v, r)"
@@ -136,6 +136,7 @@ class StepOutput:
             (|u|, |v| > max_speed, |r| > max_yaw_rate), or the state is not finite.
         messages: the messages of the control instant that ends the step, by
             ``MESSAGE_KEYS``, each ``(B, N)`` int64 (``FormationCore.messages``).
+        message_totals: ``(B, len(MESSAGE_KEYS))`` int64: ``messages`` summed over the vessels.
     """
 
     observation: np.ndarray
@@ -147,6 +148,16 @@ class StepOutput:
     collision: np.ndarray
     out_of_bounds: np.ndarray
     messages: dict[str, np.ndarray]
+    message_totals: np.ndarray
+
+
+def vessel_totals(block: np.ndarray) -> np.ndarray:
+    """``(B, N, K)`` → ``(B, K)``: the sum over the vessels, vessel by vessel (a reduction over a short
+    axis costs several times more, as for ``frontend.vessel_mean``)."""
+    total = block[:, 0].copy()
+    for j in range(1, block.shape[1]):
+        total += block[:, j]
+    return total
 
 
 def reset_output(
@@ -174,6 +185,9 @@ def reset_output(
         collision=flags.copy(),
         out_of_bounds=flags.copy(),
         messages=messages if messages is not None else {key: np.zeros((b, n), dtype=np.int64) for key in MESSAGE_KEYS},
+        message_totals=np.zeros((b, len(MESSAGE_KEYS)), dtype=np.int64)
+        if messages is None
+        else vessel_totals(np.stack([messages[key] for key in MESSAGE_KEYS], axis=-1)),
     )
 
 
@@ -247,6 +261,7 @@ class FormationCore:
         ideal[[0, 1]] = 1  # attempted, sent
         ideal[2] = config.graph.adjacency.sum(axis=0)  # delivered
         self._ideal_counts = ideal
+        self._ideal_block: np.ndarray | None = None
         self.sensor_noise = (
             None if config.sensor_noise.is_zero else SensorNoiseSource(config.sensor_noise, n, self.num_envs)
         )
@@ -406,7 +421,9 @@ class FormationCore:
                     field[restart_ids] = 0
                 for value in out.components.values():
                     value[restart_ids] = 0.0
-        out.messages = self.messages()
+        block = self._message_block()
+        out.messages = {key: block[..., k] for k, key in enumerate(MESSAGE_KEYS)}
+        out.message_totals = vessel_totals(block)
         if cfg.transmit:
             self._traffic(out.observation, slice(None))
         if cfg.reward.message_cost > 0:
@@ -501,6 +518,7 @@ class FormationCore:
             collision=flags[:, 0].copy(),
             out_of_bounds=flags[:, 1].copy(),
             messages={},
+            message_totals=np.empty(0),
         )
 
     def closed_loop(self, commands: dict[str, np.ndarray]) -> Callable[[float, np.ndarray], np.ndarray]:
@@ -677,15 +695,30 @@ class FormationCore:
         """The messages of the last control instant per vessel, by ``MESSAGE_KEYS``, each ``(B, N)`` int64
         (with ``env_ids``, those formations'). With ideal links every vessel broadcasts once and reaches
         each out-neighbour of the graph."""
+        block = self._message_block(env_ids)
+        return {key: block[..., k] for k, key in enumerate(MESSAGE_KEYS)}
+
+    def _message_block(self, env_ids: np.ndarray | slice | None = None) -> np.ndarray:
+        """``(B, N, len(MESSAGE_KEYS))`` int64: the counters and the bits, a new array (read-only and made
+        once for all formations with ideal links, where it is the same at every step)."""
         ids = slice(None) if env_ids is None else env_ids
         if self.channel is None:
             b = len(self.time[ids])
-            counts = np.broadcast_to(self._ideal_counts, (b, *self._ideal_counts.shape))
-        else:
-            counts = self.channel.counts[ids]
-        out = {key: np.array(counts[:, k]) for k, key in enumerate(MESSAGE_KEYS[:-1])}
-        out["bits_sent"] = counts[:, SENT] * self.config.channel.message_bits
-        return out
+            if b == self.num_envs and self._ideal_block is not None:
+                return self._ideal_block
+            block = self._counted(np.broadcast_to(self._ideal_counts, (b, *self._ideal_counts.shape)))
+            if b == self.num_envs:
+                block.setflags(write=False)
+                self._ideal_block = block
+            return block
+        return self._counted(self.channel.counts[ids])
+
+    def _counted(self, counts: np.ndarray) -> np.ndarray:
+        """``(B, len(COUNTERS), N)`` counters and the bits they sent as one new ``(B, N, len(MESSAGE_KEYS))``."""
+        block = np.empty((counts.shape[0], counts.shape[2], len(MESSAGE_KEYS)), dtype=np.int64)
+        block[..., :-1] = counts.transpose(0, 2, 1)
+        np.multiply(counts[:, SENT], self.config.channel.message_bits, out=block[..., -1])
+        return block
 
     def _traffic(self, obs: np.ndarray, ids: np.ndarray | slice) -> None:
         """Write ``TRANSMIT_FEATURES`` into the last entries of observations ``obs`` of formations ``ids``."""
@@ -752,4 +785,5 @@ class FormationCore:
             collision=collision,
             out_of_bounds=out_of_bounds,
             messages={},
+            message_totals=np.empty(0),
         )

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 from gymnasium.utils import seeding
 
-from marine_formation_env.core import COLUMNS_HINT, REWARD_COMPONENTS, FormationCore, StepOutput
+from marine_formation_env.core import COLUMNS_HINT, MESSAGE_KEYS, REWARD_COMPONENTS, FormationCore, StepOutput
 from marine_formation_env.errors import check_seed, checked_array
 from marine_formation_env.render import check_render_mode, render_fps
 from marine_formation_env.scenarios import (
@@ -334,7 +334,8 @@ def formation_infos(out: StepOutput, time: np.ndarray) -> dict[str, Any]:
     }
     if out.commanded_speed is not None:
         infos["commanded_speed"] = np.array(out.commanded_speed, dtype=np.float64)
-    infos.update({key: np.asarray(value, dtype=np.int64).sum(axis=1) for key, value in out.messages.items()})
+    totals = np.array(out.message_totals)  # the core's sums over the vessels, copied out of its arrays
+    infos.update({key: totals[:, k] for k, key in enumerate(MESSAGE_KEYS)})
     return infos
 
 
