@@ -1,4 +1,4 @@
-"""Ray: the sweep's cells as Ray tasks, RLlib PPO on a two-node cluster, its checkpoint evaluated.
+"""Ray: the sweep's cells as Ray tasks, the benchmark's cells and RLlib PPO on two-node clusters.
 
 Needs the ``rllib`` extra (``.venv-ecosystem``, see README): skipped elsewhere.
 Every cluster runs in its own network and PID namespaces (``tests/isolated.py``):
@@ -43,21 +43,31 @@ def test_sweep_on_ray_gives_the_report_of_the_local_run(tmp_path):
     assert on_ray.with_suffix(".png").stat().st_size > 0
 
 
-def test_the_benchmark_s_cells_on_ray_score_as_the_local_run(tmp_path):
+def test_the_benchmark_s_cells_on_a_two_node_cluster_score_as_the_local_run(tmp_path):
+    """The head node has no CPU, so the cell (a Ray task of one CPU) can only run on the worker node."""
     pytest.importorskip("benchmarl")
     argv = ["table", "--quick", "--tasks", "paper_speed", "--algorithms", "mappo", "--seeds", "0", "--episodes", "2"]
     assert (
         suite.main([*argv, "--out", str(tmp_path / "local"), "--results", str(tmp_path / "local.json"), "--quiet"]) == 0
     )
     remote = " ".join([*argv, "--out", str(tmp_path / "ray"), "--results", str(tmp_path / "ray.json"), "--quiet"])
-    done = run_isolated(f"$PYTHON -m benchmarks.suite {remote} --address local", timeout=300, cwd=str(ROOT))
-    assert done.returncode == 0, done.stderr[-3000:]
+    port = 6392
+    script = f"""
+RAY="$(dirname "$PYTHON")/ray"
+export RAY_AUTH_MODE=token
+"$RAY" start --head --port={port} --num-cpus=0 --include-dashboard=false --disable-usage-stats
+"$RAY" start --address=127.0.0.1:{port} --num-cpus=1 --disable-usage-stats
+trap '"$RAY" stop --force' EXIT
+$PYTHON -m benchmarks.suite {remote} --address 127.0.0.1:{port}
+"""
+    done = run_isolated(script, timeout=300, cwd=str(ROOT))
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     here, there = (json.loads((tmp_path / name).read_text()) for name in ("local.json", "ray.json"))
     for tasks in (here["tasks"], there["tasks"]):
         assert tasks["paper_speed"].pop("provenance")["command"].startswith("python -m benchmarks.suite table")
     assert here["tasks"] == there["tasks"]  # the reference and random policy, evaluated by the driver
     cell, far = here["cells"]["paper_speed/mappo/seed_0"], there["cells"]["paper_speed/mappo/seed_0"]
-    assert far["provenance"]["command"].endswith("--address local")
+    assert far["provenance"]["command"].endswith(f"--address 127.0.0.1:{port}")
     # seeded training in a process of its own: the same policy, up to the order in which a Ray worker's math
     # libraries sum in float32 (measured: returns agree to 4e-10 relative)
     for key in ("return", "final_spread", "final_cross_track", "action_change"):
