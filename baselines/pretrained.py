@@ -59,7 +59,15 @@ from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
 from marine_formation_env.cli import ArgumentParser
-from marine_formation_env.rules import COORDINATION, CURVATURE, LANE_OFFSET, OWN_SIZE, SLOT_SIZE, slot_count
+from marine_formation_env.rules import (
+    COORDINATION,
+    CURVATURE,
+    LANE_OFFSET,
+    OWN_SIZE,
+    SLOT_SIZE,
+    slot_count,
+    traffic_entries,
+)
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = [
@@ -231,6 +239,8 @@ class MLPPolicy(BatchPolicy):
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
+#: ``predicted_inputs``' scales of ``TRANSMIT_FEATURES``: the budget's share as it is, seconds by 10 as ages.
+TRAFFIC_SCALE = np.array([1.0, 10.0])
 #: A slot network's slot inputs (link bit, Δθ, Δẋ, age) as a neighbour in agreement has them, by
 #: multiplication: Δθ = Δẋ = 0, the link bit and the age kept (``zero_at_agreement``).
 AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0])
@@ -268,11 +278,17 @@ def predicted_inputs(obs: np.ndarray) -> np.ndarray:
 
     Each slot's Δθ predicted to now from the message's velocity and age (as ``reference:extrapolate``),
     κ·D_y for the lane offset (``own_inputs``), every entry divided by ``OWN_SCALE`` or
-    ``SLOT_SCALE``. ``training.inputs.PredictedInputs`` is the same map in torch (``training.torchrl_ppo``'s
-    ``inputs: predicted``).
+    ``SLOT_SCALE``; with ``transmit`` the last entries (``TRANSMIT_FEATURES``) divided by
+    ``TRAFFIC_SCALE``. ``training.inputs.PredictedInputs`` is the same map in torch
+    (``training.torchrl_ppo``'s ``inputs: predicted``).
     """
-    own, slots = own_and_slots(obs)
-    return np.concatenate([own, slots.reshape(*slots.shape[:-2], -1)], axis=-1)
+    obs = np.asarray(obs, dtype=np.float64)
+    traffic = traffic_entries(obs.shape[-1])
+    own, slots = own_and_slots(obs[..., : obs.shape[-1] - traffic])
+    parts = [own, slots.reshape(*slots.shape[:-2], -1)]
+    if traffic:
+        parts.append(obs[..., -traffic:] / TRAFFIC_SCALE)
+    return np.concatenate(parts, axis=-1)
 
 
 #: The arrays every ``slot_features`` weights dict holds,

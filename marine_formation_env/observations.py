@@ -12,14 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES
+from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES, TRANSMIT_FEATURES
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["MIN_CURVATURE_BOUND", "TRANSMIT_FEATURES", "ObservationLayout", "observation_bounds", "observation_space"]
 
-#: The entries a vessel that decides when to broadcast observes last: the share of its token bucket left
-#: (1 without a budget) and the time since its last broadcast, or since reset before the first [s].
-TRANSMIT_FEATURES = ("budget_left", "since_broadcast")
 
 #: The curvature entries' bound [1/m] is at least this (a radius of 100 m), so that
 #: observation spaces of straight and gently curved scenarios are the same.

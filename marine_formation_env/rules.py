@@ -41,6 +41,7 @@ __all__ = [
     "SLOT_SIZE",
     "SURGE",
     "SWAY",
+    "TRANSMIT_FEATURES",
     "VELOCITY",
     "along_track",
     "bounded_cost",
@@ -52,6 +53,7 @@ __all__ = [
     "slot_count",
     "slot_differences",
     "terminal_term",
+    "traffic_entries",
 ]
 
 #: The own part of a vessel's observation, in order.
@@ -88,6 +90,26 @@ LOOKAHEAD = 100.0
 LINK, COORDINATION, VELOCITY, AGE = (
     SLOT_FEATURES.index(name) for name in ("linked", "coordination_error", "velocity_difference", "age")
 )
+
+
+#: The entries after the slots when each vessel decides when to broadcast (``ScenarioConfig.transmit``): the
+#: share of its token bucket left and the time since its last broadcast [s].
+TRANSMIT_FEATURES = ("budget_left", "since_broadcast")
+
+
+def traffic_entries(dim: int) -> int:
+    """How many entries follow the slots in an observation of ``dim`` entries: ``len(TRANSMIT_FEATURES)``
+    with ``transmit``, else 0 (a slot has ``SLOT_SIZE`` = 4 entries, so the two cases never meet).
+
+    Raises:
+        ValueError: ``dim`` is neither ``OWN_SIZE + SLOT_SIZE · K`` nor that plus ``TRANSMIT_FEATURES``.
+    """
+    extra = (dim - OWN_SIZE) % SLOT_SIZE
+    if dim < OWN_SIZE or extra not in (0, len(TRANSMIT_FEATURES)):
+        raise ValueError(
+            f"an observation of size {dim} is not {OWN_SIZE} + {SLOT_SIZE}·slots (+ {len(TRANSMIT_FEATURES)})"
+        )
+    return extra
 
 
 def slot_count(dim: int) -> int:

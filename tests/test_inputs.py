@@ -133,3 +133,15 @@ def _acoustic_observations() -> np.ndarray:
         if step % 10 == 9:
             seen.append(np.stack(list(obs.values())))
     return np.concatenate(seen).astype(np.float64)
+
+
+def test_with_transmit_the_budget_and_the_time_since_broadcast_pass_through_at_their_scale():
+    obs = np.concatenate([_own(), [1.0, -10.0, 1.0, 2.5], [0.25, 7.0]])  # budget left 25 %, 7 s since broadcast
+    out = predicted_inputs(obs)
+    np.testing.assert_allclose(out[:-2], predicted_inputs(obs[:-2]), rtol=1e-12)
+    np.testing.assert_allclose(out[-2:], [0.25, 0.7], rtol=1e-12)  # TRAFFIC_SCALE: as it is, seconds by 10
+    torch = pytest.importorskip("torch")
+    from training.inputs import PredictedInputs
+
+    theirs = PredictedInputs()(torch.as_tensor(obs[None], dtype=torch.float32)).numpy()[0]
+    np.testing.assert_allclose(theirs, out, rtol=1e-5, atol=1e-6)

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from baselines.pretrained import OWN_SCALE, SLOT_SCALE
+from baselines.pretrained import OWN_SCALE, SLOT_SCALE, TRAFFIC_SCALE
 from marine_formation_env.rules import (
     AGE,
     COORDINATION,
@@ -47,6 +47,7 @@ from marine_formation_env.rules import (
     SWAY,
     VELOCITY,
     slot_count,
+    traffic_entries,
 )
 
 __all__ = ["DROPPABLE", "InputMask", "PredictedInputs", "dropped_mask", "own_and_slots"]
@@ -102,15 +103,22 @@ class PredictedInputs(nn.Module):
 
     own_scale: torch.Tensor
     slot_scale: torch.Tensor
+    traffic_scale: torch.Tensor
 
     def __init__(self) -> None:
         super().__init__()
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
+        self.register_buffer("traffic_scale", torch.tensor(TRAFFIC_SCALE, dtype=torch.float32))
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
-        own, slots = own_and_slots(observations, self.own_scale, self.slot_scale)
-        return torch.cat([own, slots.flatten(-2)], dim=-1)
+        traffic = traffic_entries(observations.shape[-1])
+        dim = observations.shape[-1] - traffic
+        own, slots = own_and_slots(observations[..., :dim], self.own_scale, self.slot_scale)
+        parts = [own, slots.flatten(-2)]
+        if traffic:
+            parts.append(observations[..., dim:] / self.traffic_scale)
+        return torch.cat(parts, dim=-1)
 
 
 class InputMask(nn.Module):
