@@ -341,3 +341,17 @@ def test_compiled_and_numpy_backends_count_alike():
                 np.testing.assert_array_equal(a, b, err_msg=key)
             else:
                 assert np.abs(a.sum(axis=0) - b.sum(axis=0)).max() <= (96 if key == "bits_sent" else 1), key
+
+
+def test_the_transmit_views_pass_the_gymnasium_and_pettingzoo_checkers():
+    import warnings
+
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+    from pettingzoo.test import parallel_api_test
+
+    env = gymnasium.make("MarineFormation-v1", scenario="acoustic_budget", transmit=True, horizon=30.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+    parallel_api_test(parallel_env("paper_budget", transmit=True, horizon=30.0), num_cycles=80)
