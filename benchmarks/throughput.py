@@ -692,7 +692,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.format:
         try:
-            print(format_report(json.loads(args.format.read_text())))
+            saved = json.loads(args.format.read_text())
+            print("\n".join(format_traffic(saved)).strip() if "parallel" not in saved else format_report(saved))
         except (OSError, ValueError, KeyError) as err:
             parser.error(f"--format {args.format}: not a readable report ({type(err).__name__}: {err})")
         return 0
