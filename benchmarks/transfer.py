@@ -181,7 +181,8 @@ def reference_variants(config: ScenarioConfig) -> dict[str, tuple[dict[str, Any]
 
     ``reference`` always; ``reference:extrapolate`` when observations are not ideal (over ideal links it is the
     plain reference); integral LOS (σ = ``DEFAULT_ILOS_GAIN``) under a current: the policy's at guidance and force,
-    the env's ``los_integral_gain`` at speed (the env steers there); both when both apply.
+    the env's ``los_integral_gain`` at speed (the env steers there); both when both apply. Where the policies
+    decide when to broadcast (``transmit``), every variant broadcasts by the channel's rule instead.
     """
     lossy = not config.ideal_observations
     current = not config.current.is_zero
@@ -197,6 +198,8 @@ def reference_variants(config: ScenarioConfig) -> dict[str, tuple[dict[str, Any]
         out["reference:ilos"] = ilos
     if lossy and current:
         out["reference:extrapolate,ilos"] = ({"extrapolate": True, **ilos[0]}, ilos[1])
+    if config.transmit:  # the reference does not send the transmit action: it broadcasts by the channel's rule
+        out = {label: (kwargs, {**extra, "transmit": False}) for label, (kwargs, extra) in out.items()}
     return out
 
 
