@@ -81,6 +81,7 @@ def test_tdma_counts_one_broadcast_per_vessel_per_frame():
     np.testing.assert_array_equal(sent, np.broadcast_to(expected, sent.shape))
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_loss_counts_follow_the_loss_probability():
     """Bernoulli loss p = 0.3 on every link: the lost share of link messages is p within 4 binomial sigmas."""
     cfg = make_config("paper", channel={"loss": 0.3}, **SHORT)
@@ -133,6 +134,7 @@ def test_threshold_zero_equals_periodic_broadcasting_exactly(scenario, channel):
             np.testing.assert_array_equal(out_a.messages[key], out_b.messages[key])
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_threshold_zero_equals_periodic_on_a_switching_graph():
     schedule = [[10.0, "paper"], [10.0, "complete"]]
     overrides = {**SHORT, "horizon": 40.0, "topology_schedule": schedule}
@@ -179,6 +181,7 @@ def test_min_interval_and_heartbeat_bound_the_gaps_between_broadcasts():
     np.testing.assert_array_equal(sent, np.broadcast_to((steps % 6 == 0)[:, None, None], sent.shape))
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_event_triggered_steady_spread_stays_within_the_derived_bound():
     """With ideal links the paper's law settles where each vessel's neighbours are known within δ: the final
     spread stays within ``spread_bound`` (grounded Laplacian, marine_formation_env.graph), and the bound is
@@ -256,6 +259,7 @@ def test_message_cost_charges_each_broadcast():
         np.testing.assert_allclose(a.components["communication"], -0.01 * a.messages["messages_sent"])
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_every_front_end_reports_the_counters():
     env = parallel_env("acoustic", **SHORT)
     _, infos = env.reset(seed=0)
@@ -269,6 +273,7 @@ def test_every_front_end_reports_the_counters():
     venv.close()
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_evaluation_reports_messages_per_vessel_per_second():
     cfg = make_config("radio", **SHORT)
     metrics, _ = episode_reports(ReferencePolicy(cfg), cfg, [0])
@@ -277,6 +282,7 @@ def test_evaluation_reports_messages_per_vessel_per_second():
     assert metrics[0]["bit_rate"] == pytest.approx(20 / 30.0 * 96)
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_reference_event_option_runs_the_extrapolating_reference_with_event_triggering(capsys):
     assert reference_options("reference:event=0.5") == {"extrapolate": True}
     cfg = policy_config("reference:event=0.5", make_config("acoustic"))
@@ -343,6 +349,7 @@ def test_compiled_and_numpy_backends_count_alike():
                 assert np.abs(a.sum(axis=0) - b.sum(axis=0)).max() <= (96 if key == "bits_sent" else 1), key
 
 
+@pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
 def test_the_transmit_views_pass_the_gymnasium_and_pettingzoo_checkers():
     import warnings
 

@@ -43,6 +43,7 @@ def test_sweep_on_ray_gives_the_report_of_the_local_run(tmp_path):
     assert on_ray.with_suffix(".png").stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_the_benchmark_s_cells_on_a_two_node_cluster_score_as_the_local_run(tmp_path):
     """The head node has no CPU, so the cell (a Ray task of one CPU) can only run on the worker node."""
     pytest.importorskip("benchmarl")
