@@ -381,6 +381,7 @@ def _truncated_copy(src: Path, dst: Path, broken: str) -> Path:
     return dst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("broken", ["model.zip", "vecnormalize.pkl"])
 def test_evaluate_refuses_a_truncated_model_file(saved_run, tmp_path, broken):
     ok = run_cli("-m", "baselines.evaluate", "--quiet", "--set", "horizon=2", "--policy", str(saved_run))

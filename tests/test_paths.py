@@ -340,6 +340,7 @@ def _final_circle(monkeypatch_crab=None, monkeypatch_lane=None, monkeypatch=None
     return s[0], c.offset[0] - PAPER_D[:, 1], np.ptp(c.ell[0] - PAPER_D[:, 0]), c.ell_dot[0]
 
 
+@pytest.mark.slow
 def test_plain_laws_leave_the_predicted_offsets_and_the_shipped_ones_remove_them(monkeypatch):
     """docs/paths.md, "The plain generalizations" (SPEC §8's): each one's defect matches its analytic prediction.
 
