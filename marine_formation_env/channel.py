@@ -637,7 +637,7 @@ class LinkChannel:
                 held[rows] = np.where(newer, pend[now], held[rows])
             self.has_message[rows] = has | newer
             self.pend_valid[now] = False
-        self._advance_next_arrival(ids, np.asarray(steps))
+        self._advance_next_arrival(ids, steps)
 
     def _broadcasts(
         self, rows: Any, steps: np.ndarray, time: np.ndarray, theta: np.ndarray, xdot: np.ndarray, counts: np.ndarray

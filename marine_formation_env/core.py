@@ -64,7 +64,7 @@ import numpy as np
 
 from marine_formation_env.actions import map_actions
 from marine_formation_env.backends import resolve_backend
-from marine_formation_env.channel import COUNTERS, SENT, LinkChannel
+from marine_formation_env.channel import ATTEMPTED, COUNTERS, DELIVERED, SENT, LinkChannel
 from marine_formation_env.control import (
     curved_heading_inputs,
     curved_path_following_inputs,
@@ -258,8 +258,8 @@ class FormationCore:
         )
         # with ideal links every vessel broadcasts at every control instant and reaches its out-neighbours
         ideal = np.zeros((len(COUNTERS), n), dtype=np.int64)
-        ideal[[0, 1]] = 1  # attempted, sent
-        ideal[2] = config.graph.adjacency.sum(axis=0)  # delivered
+        ideal[[ATTEMPTED, SENT]] = 1
+        ideal[DELIVERED] = config.graph.adjacency.sum(axis=0)
         self._ideal_counts = ideal
         self._ideal_block: np.ndarray | None = None
         self.sensor_noise = (
@@ -424,13 +424,14 @@ class FormationCore:
         block = self._message_block()
         out.messages = {key: block[..., k] for k, key in enumerate(MESSAGE_KEYS)}
         out.message_totals = vessel_totals(block)
-        if cfg.transmit:
-            self._traffic(out.observation, slice(None))
+        sent = out.messages["messages_sent"]
         if cfg.reward.message_cost > 0:
-            cost = -cfg.reward.message_cost * out.messages["messages_sent"]
+            cost = -cfg.reward.message_cost * sent
             cost[restart_ids] = 0.0  # a new episode's first output has no reward
-            out.components["communication"] = cost
             out.reward = out.reward + cost
+        else:
+            cost = np.zeros(sent.shape)
+        out.components["communication"] = cost
         if "u_c" in commands:
             self._last_u_c = commands["u_c"]
         if e_start is not None:  # integral LOS: one Euler step of its integrator per control period
@@ -506,7 +507,9 @@ class FormationCore:
         obs, comps, reward, flags = self._kernel.run(
             self.state, cmd, self._last_u_c, time0, steer_dy, self.time, self.steps, actions, restart, starts, self.arc
         )
-        components = dict(zip(REWARD_COMPONENTS, (*comps, np.zeros((b, n))), strict=True))
+        components = dict(zip(REWARD_COMPONENTS[:-1], comps, strict=True))  # communication: ``step`` adds it
+        if cfg.transmit:  # the kernel writes the own part and the slots
+            self._traffic(obs, slice(None))
         terminated = flags[:, 0] | flags[:, 1]
         return StepOutput(
             observation=obs,
@@ -670,8 +673,9 @@ class FormationCore:
         out[..., 6] = cfg.u_d.rate(time)[:, None]
         out[..., LANE_OFFSET] = self._dy
         # the n − 1 vessels' slots (padding slots beyond them stay 0: not linked)
-        slot_part = out[..., self.layout.own : self.layout.own + self.layout.slot * self.layout.slots]
-        slots = slot_part.reshape(b, n, self.layout.slots, self.layout.slot)[:, :, : n - 1]
+        slots = out[..., self.layout.own : self.layout.slots_end].reshape(b, n, self.layout.slots, self.layout.slot)[
+            :, :, : n - 1
+        ]
         if coords is not None:
             theta, x_dot = coords.ell - self._dx, coords.ell_dot
         if self.channel is None:
@@ -772,7 +776,6 @@ class FormationCore:
         components["terminal"] = np.broadcast_to(
             terminal_term(terminated, w.terminal_rate, cfg.horizon - self.time)[:, None], (self.num_envs, self.n)
         ).copy()
-        components["communication"] = np.zeros((self.num_envs, self.n))
         reward = sum(components.values())
         truncated = (self.steps >= cfg.max_steps) & ~terminated
         return StepOutput(

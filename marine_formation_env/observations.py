@@ -45,6 +45,11 @@ class ObservationLayout:
     transmit: bool = False
 
     @property
+    def slots_end(self) -> int:
+        """Index one past the last slot entry (where ``TRANSMIT_FEATURES`` start)."""
+        return self.own + self.slot * self.slots
+
+    @property
     def traffic(self) -> int:
         """Entries after the slots: ``TRANSMIT_FEATURES`` with ``transmit``, else none."""
         return len(TRANSMIT_FEATURES) if self.transmit else 0
@@ -57,7 +62,7 @@ class ObservationLayout:
     @property
     def dim(self) -> int:
         """Length of one agent's observation."""
-        return self.own + self.slot * self.slots + self.traffic
+        return self.slots_end + self.traffic
 
     def slot_vessels(self, j: int) -> list[int]:
         """The vessel held in each slot of vessel ``j``'s observation."""
@@ -70,7 +75,7 @@ class ObservationLayout:
         Padding slots (``observation_slots`` > N − 1) are left out.
         """
         own = obs[..., : self.own]
-        slots = obs[..., self.own : self.own + self.slot * self.slots].reshape(*obs.shape[:-1], self.slots, self.slot)
+        slots = obs[..., self.own : self.slots_end].reshape(*obs.shape[:-1], self.slots, self.slot)
         return own, slots[..., : self.n_vessels - 1, :]
 
 
