@@ -20,7 +20,9 @@ policy. Per cell: the policy's mean return R, success, final spread and final
 max |e|; the best reference variant's return R_ref (the highest mean return),
 which variant and its success; ``R_ref / R`` (returns are ≤ 0, so > 1: the
 policy returns more) and the normalized score ``(R − R_rand) / (R_ref − R_rand)``
-(1: the best reference, 0: random). Then, for each policy on its own training
+(1: the best reference, 0: random); and whether the cell holds the generalization
+target (``holds_target``: R_ref / R ≥ 0.9, and success ≥ 80 % wherever the
+best reference reaches 80 %). Then, for each policy on its own training
 setting, the final spread and max |e| (mean and max over episodes) beside the
 best reference's, on the same seeds. Every run uses the reserved benchmark
 seeds (``baselines.seeds.benchmark_seeds``)::
@@ -63,6 +65,7 @@ __all__ = [
     "Setting",
     "best_reference",
     "compatibility",
+    "holds_target",
     "level_settings",
     "main",
     "normalized_score",
@@ -78,6 +81,9 @@ BIG_TEAMS = ((8, "ring"), (20, "ring"))
 BIG_TEAM_MAX_HORIZON = 400.0
 #: ``--quick``: episodes, horizon [s], presets and team sizes.
 QUICK_EPISODES, QUICK_HORIZON, QUICK_PRESETS, QUICK_TEAMS = 2, 20.0, ("paper", "acoustic"), (3, 8)
+#: The generalization target of a cell: R_ref / R at least TARGET_RATIO, and a success rate at least
+#: TARGET_SUCCESS wherever the best reference's reaches TARGET_SUCCESS.
+TARGET_RATIO, TARGET_SUCCESS = 0.9, 0.8
 #: Seed of the random policy's action stream.
 RANDOM_SEED = 0
 
@@ -219,6 +225,13 @@ def normalized_score(policy_return: float, reference_return: float, random_retur
     return None if span == 0 else (policy_return - random_return) / span
 
 
+def holds_target(ratio: float | None, success: float, reference_success: float) -> bool:
+    """``R_ref / R ≥ TARGET_RATIO``, and ``success ≥ TARGET_SUCCESS`` if ``reference_success ≥ TARGET_SUCCESS``."""
+    if ratio is None or ratio < TARGET_RATIO:
+        return False
+    return reference_success < TARGET_SUCCESS or success >= TARGET_SUCCESS
+
+
 def _summary(episodes: list[dict[str, Any]]) -> dict[str, Any]:
     spread = [e["final_coordination_spread"] for e in episodes]
     cross = [e["final_cross_track_max"] for e in episodes]
@@ -316,6 +329,7 @@ def transfer(
             result = _run(policy, config, seeds)
             result["ratio"] = return_ratio(ref_return, result["return"])
             result["score"] = normalized_score(result["return"], ref_return, rand_return)
+            result["holds_target"] = holds_target(result["ratio"], result["success"], references[best]["success"])
             cells[info.name][s.label].update(result)
             if bar is not None:
                 bar.update(episodes)
@@ -408,6 +422,23 @@ def format_matrix(report: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+def format_target(report: dict[str, Any]) -> str:
+    """Per policy: the settings it takes, how many hold the target, and the ones that do not."""
+    out = ["| policy (level) | settings taken | target held | not held (R_ref/R · success) |", "|---|---|---|---|"]
+    for entry in report["policies"]:
+        taken = {label: cell for label, cell in entry["cells"].items() if cell["compatible"]}
+        missed = [
+            f"{label} ({_fmt(cell['ratio'], '.2f')} · {cell['success']:.0%})"
+            for label, cell in taken.items()
+            if not cell["holds_target"]
+        ]
+        out.append(
+            f"| {entry['name']} ({entry['level']}) | {len(taken)} | {len(taken) - len(missed)} "
+            f"| {', '.join(missed) or '–'} |"
+        )
+    return "\n".join(out)
+
+
 def format_cells(report: dict[str, Any]) -> str:
     """Every cell, one row: the policy's numbers beside the best reference's and random's."""
     rows = {(row["level"], row["label"]): row for row in report["settings"]}
@@ -459,6 +490,9 @@ def format_markdown(report: dict[str, Any]) -> str:
                 f"seeds {report['seeds'][0]}–{report['seeds'][-1]}); ‡: the policy's training setting.",
                 "## R_ref / R · success\n\nR_ref: the best reference variant's mean return; > 1: the policy returns "
                 "more. ✗: a setting the policy cannot take.\n\n" + format_matrix(report),
+                f"## The generalization target\n\nA cell holds it with R_ref / R ≥ {TARGET_RATIO} and, wherever "
+                f"the best reference's success reaches {TARGET_SUCCESS:.0%}, a success of at least "
+                f"{TARGET_SUCCESS:.0%}.\n\n" + format_target(report),
                 "## Settings that cannot be built\n\n"
                 + ("\n".join(f"- {u['label']} ({u['level']}): {u['reason']}" for u in report["unbuildable"]) or "none"),
                 "## Every cell\n\nscore = (R − R_rand) / (R_ref − R_rand).\n\n" + format_cells(report),

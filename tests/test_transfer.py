@@ -16,6 +16,7 @@ from baselines.rollout import RandomPolicy
 from baselines.seeds import benchmark_seeds
 from benchmarks.transfer import (
     compatibility,
+    holds_target,
     level_settings,
     main,
     normalized_score,
@@ -127,6 +128,15 @@ def test_scores_on_hand_made_numbers():
     assert normalized_score(-50.0, -300.0, -300.0) is None
 
 
+def test_the_target_needs_the_ratio_and_success_where_the_reference_succeeds():
+    assert holds_target(0.95, 0.9, 1.0)
+    assert not holds_target(0.85, 1.0, 1.0)  # returns too little
+    assert not holds_target(None, 1.0, 1.0)  # R = 0: no ratio
+    assert not holds_target(1.2, 0.75, 0.8)  # the reference succeeds (80 %), the policy does not
+    assert holds_target(1.2, 0.0, 0.75)  # the reference does not succeed either: the return decides
+    assert holds_target(0.9, 0.8, 0.8)  # both bars are inclusive
+
+
 def test_quick_run_end_to_end(tmp_path):
     prefix = tmp_path / "transfer"
     start = time.perf_counter()
@@ -139,6 +149,7 @@ def test_quick_run_end_to_end(tmp_path):
     assert prefix.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = prefix.with_suffix(".md").read_text()
     assert "Precision on the training setting" in text and "✗ team size" in text
+    assert "## The generalization target" in text
     policies = {p["name"]: p for p in report["policies"]}
     assert set(policies) == set(INFOS)
     # the 3-vessel MLPs are listed as refusing the team of 8, with check_compatible's reason
