@@ -201,14 +201,12 @@ def test_training_throughput_refuses_bad_arguments_by_name(capsys, args, message
 
 
 def test_the_traffic_table_gives_each_case_over_the_ideal_links_of_its_row():
-    from benchmarks.throughput import TRAFFIC, format_traffic
-
     def entry(rate: float, over: float | None = None) -> dict:
         out = {"steps_per_s": rate / 64, "env_steps_per_s": rate, "spread": {"min": rate / 128, "max": rate / 32}}
         return out if over is None else {**out, "over_ideal": over}
 
-    row = {name: entry(1000.0 * (k + 1), (k + 1) / 1.0) for k, name in enumerate(TRAFFIC)}
+    row = {name: entry(1000.0 * (k + 1), (k + 1) / 1.0) for k, name in enumerate(benchmark.TRAFFIC)}
     row["ideal"] = entry(1000.0)
-    text = "\n".join(format_traffic({"traffic": {"64": row}}))
+    text = "\n".join(benchmark.format_traffic({"traffic": {"64": row}}))
     assert "| 64 | 1,000 [500–2,000] | 2,000 [1,000–4,000] | 2.00 |" in text
-    assert format_traffic({}) == []
+    assert benchmark.format_traffic({}) == []

@@ -187,6 +187,24 @@ def test_atomic_write_replaces_the_file_only_when_the_write_completes(tmp_path):
     assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # as open() would create it, not mkstemp's 0600
 
 
+def test_config_yaml_writes_a_shared_setting_in_full_at_each_key(tmp_path):
+    """A config whose teams share a setting through a YAML anchor (``&radio`` … ``*radio``) is recorded in full."""
+    config = tmp_path / "teams.yaml"
+    config.write_text(
+        f"{marine_formation_env.ENV_ID}:\n  algo: ppo\n  teams:\n"
+        "    - {n_vessels: 3, channel: &radio {loss: 0.05, tdma_slot: 0.5}}\n"
+        "    - {n_vessels: 4, channel: *radio}\n"
+    )
+    resolved = load_config(config)
+    out = tmp_path / "run"
+    out.mkdir()
+    run_folder.write_config(out, "sb3", resolved, seed=0)
+    text = (out / "config.yaml").read_text()
+    assert "&" not in text and "*" not in text
+    teams = yaml.safe_load(text)["teams"]
+    assert [team["channel"] for team in teams] == [{"loss": 0.05, "tdma_slot": 0.5}] * 2
+
+
 def test_atomic_write_that_fails_leaves_the_old_file_and_no_temporary(tmp_path):
     path = tmp_path / "vecnormalize.pkl"
     path.write_bytes(b"old")

@@ -397,10 +397,18 @@ def config_record(trainer: str, resolved: dict[str, Any], seed: int) -> dict[str
     return {"trainer": trainer, "env_id": ENV_ID, "seed": int(seed), **rest}
 
 
+class _FullDumper(yaml.SafeDumper):
+    """Writes a value that several keys share (an anchor in the config file) in full at each key."""
+
+    def ignore_aliases(self, data: Any) -> bool:
+        return True
+
+
 def write_config(out: Path, trainer: str, resolved: dict[str, Any], seed: int) -> dict[str, Any]:
     """Write ``out/config.yaml`` (``config_record``) atomically; return the record."""
     record = config_record(trainer, resolved, seed)
-    write_bytes(out / CONFIG_FILE, yaml.safe_dump(record, sort_keys=False, allow_unicode=True).encode())
+    text = yaml.dump(record, Dumper=_FullDumper, sort_keys=False, allow_unicode=True)
+    write_bytes(out / CONFIG_FILE, text.encode())
     return record
 
 
