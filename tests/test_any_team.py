@@ -263,8 +263,9 @@ def test_teams_side_by_side_step_as_each_team_alone():
 def test_the_any_team_config_pads_every_team_to_the_largest():
     resolved = validate(load_config(ANY_N))
     teams = team_overrides(resolved)
-    assert sorted({kw["n_vessels"] for kw in teams}) == [3, 4, 5, 6]
-    assert {kw["observation_slots"] for kw in teams} == {5}
+    assert {scenario for scenario, _ in teams} == {"paper"}  # no team names a preset: the config's
+    assert sorted({kw["n_vessels"] for _, kw in teams}) == [3, 4, 5, 6]
+    assert {kw["observation_slots"] for _, kw in teams} == {5}
     with pytest.raises(TrainConfigError, match="teams must be a list of mappings"):
         validate({**load_config(ANY_N), "teams": "all of them"})
     with pytest.raises(TrainConfigError, match=r"teams\[1\]: .*n_vessels must be an integer ≥ 2, got 1"):
@@ -273,13 +274,31 @@ def test_the_any_team_config_pads_every_team_to_the_largest():
     speed = load_config(REPO / "training" / "configs" / "paper_speed_ppo.yaml")
     mixed = validate({**speed, "teams": [{"n_vessels": 3}, {"n_vessels": 4, "topology": "ring"}]})
     assert mixed["env_kwargs"]["observation_slots"] == 3
-    assert [kw["observation_slots"] for kw in team_overrides(mixed)] == [3, 3]
+    assert [kw["observation_slots"] for _, kw in team_overrides(mixed)] == [3, 3]
     with pytest.raises(TrainConfigError, match=r"teams\[1\] has observation_slots = 7 .* env_kwargs .* 3"):
         validate({**speed, "teams": [{"n_vessels": 3}, {"n_vessels": 4, "topology": "ring", "observation_slots": 7}]})
     with pytest.raises(TrainConfigError, match="'slots' reads the link bits of raw observations"):
         validate({**speed, "policy_kwargs": {"features_extractor_class": "slots"}})  # normalize: true
     with pytest.raises(TrainConfigError, match="features_extractor_class must be one of \\['slots'\\], got 'gnn'"):
         validate({**load_config(ANY_N), "policy_kwargs": {"features_extractor_class": "gnn"}})
+
+
+def test_a_team_that_names_a_preset_trains_on_that_preset_with_its_overrides():
+    speed = load_config(REPO / "training" / "configs" / "paper_speed_ppo.yaml")
+    teams = [{"n_vessels": 3}, {"scenario": "acoustic", "n_vessels": 4, "topology": "ring"}]
+    resolved = validate({**speed, "n_envs": 1, "normalize": False, "teams": teams})
+    (first, _), (second, acoustic) = team_overrides(resolved)
+    assert (first, second) == ("paper", "acoustic") and "scenario" not in acoustic
+    venv = train_module.build_env(resolved, seed=0)
+    built = [team.config for team in venv.teams]
+    venv.close()
+    preset = parallel_env("acoustic").config.channel
+    assert built[0].channel.is_ideal  # the config's scenario: ideal links
+    # the acoustic preset's link (its TDMA slot and bursts), with the team's own size and graph and env_kwargs' level
+    assert built[1].channel == preset and built[1].n_vessels == 4 and built[1].action_level == "speed"
+    assert built[1].topology.name == "ring"
+    with pytest.raises(TrainConfigError, match=r"teams\[1\]\.scenario must be a preset name .*, got 'lake'"):
+        validate({**speed, "teams": [{"n_vessels": 3}, {"scenario": "lake"}]})
 
 
 def test_a_policy_trained_on_small_teams_exports_and_acts_in_a_team_of_20(tmp_path, monkeypatch):
@@ -340,7 +359,7 @@ def test_train_reward_shapes_every_team_s_training_env_and_nothing_else():
     rng = np.random.default_rng(0)
     for _ in range(5):
         _, rewards, _, _ = venv.step(rng.uniform(-1, 1, (venv.num_envs, 1)).astype(np.float32))
-        assert rewards.shape == (sum(kw["n_vessels"] for kw in team_overrides(resolved)),)
+        assert rewards.shape == (sum(kw["n_vessels"] for _, kw in team_overrides(resolved)),)
         assert np.all(rewards == 0.0)
     venv.close()
     unshaped = train_module.build_env({**resolved, "train_reward": {}}, seed=3)

@@ -22,7 +22,8 @@ A config file holds one mapping under the env id::
 ``teams`` (a list of env overrides, default empty) trains one policy on
 several teams at once: each item, laid over ``env_kwargs``, is a team of its
 own with ``n_envs`` formations (``{n_vessels: 5, topology: random,
-topology_seed: 2}``). ``env_kwargs`` itself (the scenario of evaluations and
+topology_seed: 2}``); a team's ``scenario`` names the preset it starts from
+instead of the config's (``{scenario: acoustic, n_vessels: 5}``). ``env_kwargs`` itself (the scenario of evaluations and
 exports) gets the largest team's ``observation_slots`` unless it sets them,
 every team inherits them, and a team with another observation length or
 level is refused; the policy must read slots (``features_extractor_class:
@@ -71,7 +72,7 @@ import yaml
 
 from marine_formation_env import ENV_ID
 from marine_formation_env.cli import int_at_least, parse_overrides, report_error
-from marine_formation_env.scenarios import ConfigError, make_config
+from marine_formation_env.scenarios import SCENARIOS, ConfigError, make_config
 
 __all__ = [
     "ALGOS",
@@ -280,15 +281,23 @@ def _same_number(a: Any, b: Any) -> bool:
     )  # fmt: skip
 
 
-def team_overrides(resolved: dict[str, Any]) -> list[dict[str, Any]]:
-    """The env overrides of each team of a resolved config (no ``teams``: ``env_kwargs`` alone).
+def team_overrides(resolved: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The preset and env overrides of each team of a resolved config (no ``teams``: the config's scenario
+    and ``env_kwargs`` alone).
 
-    With ``teams``, each team is ``env_kwargs`` with the team's overrides on top, and ``validate`` has
-    given ``env_kwargs`` (the scenario of evaluations and exports) the largest team's ``observation_slots``,
-    which every team inherits unless it sets its own.
+    With ``teams``, each team is its ``scenario`` (the config's if it names none) with ``env_kwargs`` and the
+    team's other overrides on top, and ``validate`` has given ``env_kwargs`` (the scenario of evaluations
+    and exports) the largest team's ``observation_slots``, which every team inherits unless it sets its own.
     """
     teams = resolved.get("teams") or [{}]
-    return [{**resolved["env_kwargs"], **team} for team in teams]
+    return [
+        (team.get("scenario", resolved["scenario"]), {**resolved["env_kwargs"], **_without_scenario(team)})
+        for team in teams
+    ]
+
+
+def _without_scenario(team: dict[str, Any]) -> dict[str, Any]:
+    return {key: value for key, value in team.items() if key != "scenario"}
 
 
 def training_env_kwargs(cfg: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -311,11 +320,11 @@ def check_train_reward(cfg: dict[str, Any]) -> None:
         raise TrainConfigError(f"train_reward must be a mapping of reward fields, got {shaped!r}")
     if not shaped:
         return
-    for kw in team_overrides(cfg):  # env_kwargs alone when there are no teams (the TorchRL trainer's case)
+    for scenario, kw in team_overrides(cfg):  # env_kwargs alone without teams (the TorchRL trainer's case)
         if not isinstance(kw.get("reward", {}), dict):
             raise TrainConfigError(f"train_reward needs env_kwargs.reward to be a mapping, got {kw['reward']!r}")
         try:
-            make_config(cfg["scenario"], **training_env_kwargs(cfg, kw))
+            make_config(scenario, **training_env_kwargs(cfg, kw))
         except (ValueError, TypeError) as err:
             raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
@@ -368,8 +377,11 @@ def _check_teams(resolved: dict[str, Any]) -> None:
         return
     sizes = []
     for k, team in enumerate(teams):  # each team on its own first, so an error names it
+        scenario = team.get("scenario", resolved["scenario"])
+        if not isinstance(scenario, str) or scenario not in SCENARIOS:
+            raise TrainConfigError(f"teams[{k}].scenario must be a preset name {sorted(SCENARIOS)}, got {scenario!r}")
         try:
-            sizes.append(make_config(resolved["scenario"], **{**resolved["env_kwargs"], **team}).n_vessels)
+            sizes.append(make_config(scenario, **{**resolved["env_kwargs"], **_without_scenario(team)}).n_vessels)
         except ConfigError as err:
             raise TrainConfigError(f"teams[{k}]: {err}") from None
     if "observation_slots" not in resolved["env_kwargs"]:
@@ -380,9 +392,9 @@ def _check_teams(resolved: dict[str, Any]) -> None:
     except ConfigError as err:
         raise TrainConfigError(f"env_kwargs: {err}") from None
     layout = (reference.observation_slots, reference.action_level)
-    for k, kw in enumerate(team_overrides(resolved)):
+    for k, (scenario, kw) in enumerate(team_overrides(resolved)):
         try:
-            cfg = make_config(resolved["scenario"], **kw)
+            cfg = make_config(scenario, **kw)
         except ConfigError as err:
             raise TrainConfigError(f"teams[{k}]: {err}") from None
         if (cfg.observation_slots, cfg.action_level) != layout:

@@ -114,11 +114,12 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
 
     from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
-    teams = [training_env_kwargs(resolved, kw) for kw in team_overrides(resolved)]  # train_reward's shaping
+    # each team's preset and overrides, with train_reward's shaping
+    teams = [(scenario, training_env_kwargs(resolved, kw)) for scenario, kw in team_overrides(resolved)]
     if len(teams) == 1:
-        venv: Any = SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **teams[0])
+        venv: Any = SharedPolicyVecEnv(resolved["n_envs"], teams[0][0], **teams[0][1])
     else:
-        venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], resolved["scenario"], **kw) for kw in teams])
+        venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], scenario, **kw) for scenario, kw in teams])
     venv.seed(seed)
     venv = VecMonitor(venv)
     norm = resolved["normalize"]
