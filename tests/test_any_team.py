@@ -297,7 +297,7 @@ def test_a_team_that_names_a_preset_trains_on_that_preset_with_its_overrides():
     # the acoustic preset's link (its TDMA slot and bursts), with the team's own size and graph and env_kwargs' level
     assert built[1].channel == preset and built[1].n_vessels == 4 and built[1].action_level == "speed"
     assert built[1].topology.name == "ring"
-    with pytest.raises(TrainConfigError, match=r"teams\[1\]\.scenario must be a preset name .*, got 'lake'"):
+    with pytest.raises(TrainConfigError, match=r"teams\[1\]: unknown scenario 'lake'; known scenarios: \["):
         validate({**speed, "teams": [{"n_vessels": 3}, {"scenario": "lake"}]})
 
 

@@ -72,7 +72,7 @@ import yaml
 
 from marine_formation_env import ENV_ID
 from marine_formation_env.cli import int_at_least, parse_overrides, report_error
-from marine_formation_env.scenarios import SCENARIOS, ConfigError, make_config
+from marine_formation_env.scenarios import ConfigError, make_config
 
 __all__ = [
     "ALGOS",
@@ -291,13 +291,12 @@ def team_overrides(resolved: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]
     """
     teams = resolved.get("teams") or [{}]
     return [
-        (team.get("scenario", resolved["scenario"]), {**resolved["env_kwargs"], **_without_scenario(team)})
+        (
+            team.get("scenario", resolved["scenario"]),
+            {**resolved["env_kwargs"], **{key: value for key, value in team.items() if key != "scenario"}},
+        )
         for team in teams
     ]
-
-
-def _without_scenario(team: dict[str, Any]) -> dict[str, Any]:
-    return {key: value for key, value in team.items() if key != "scenario"}
 
 
 def training_env_kwargs(cfg: dict[str, Any], env_kwargs: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -376,12 +375,9 @@ def _check_teams(resolved: dict[str, Any]) -> None:
     if not teams:
         return
     sizes = []
-    for k, team in enumerate(teams):  # each team on its own first, so an error names it
-        scenario = team.get("scenario", resolved["scenario"])
-        if not isinstance(scenario, str) or scenario not in SCENARIOS:
-            raise TrainConfigError(f"teams[{k}].scenario must be a preset name {sorted(SCENARIOS)}, got {scenario!r}")
+    for k, (scenario, kw) in enumerate(team_overrides(resolved)):  # each team on its own first, so an error names it
         try:
-            sizes.append(make_config(scenario, **{**resolved["env_kwargs"], **_without_scenario(team)}).n_vessels)
+            sizes.append(make_config(scenario, **kw).n_vessels)  # an unknown preset too
         except ConfigError as err:
             raise TrainConfigError(f"teams[{k}]: {err}") from None
     if "observation_slots" not in resolved["env_kwargs"]:

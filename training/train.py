@@ -114,12 +114,11 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
 
     from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
 
-    # each team's preset and overrides, with train_reward's shaping
-    teams = [(scenario, training_env_kwargs(resolved, kw)) for scenario, kw in team_overrides(resolved)]
-    if len(teams) == 1:
-        venv: Any = SharedPolicyVecEnv(resolved["n_envs"], teams[0][0], **teams[0][1])
-    else:
-        venv = TeamsVecEnv([SharedPolicyVecEnv(resolved["n_envs"], scenario, **kw) for scenario, kw in teams])
+    teams = [  # each team's preset and overrides, with train_reward's shaping
+        SharedPolicyVecEnv(resolved["n_envs"], scenario, **training_env_kwargs(resolved, kw))
+        for scenario, kw in team_overrides(resolved)
+    ]
+    venv: Any = teams[0] if len(teams) == 1 else TeamsVecEnv(teams)
     venv.seed(seed)
     venv = VecMonitor(venv)
     norm = resolved["normalize"]
