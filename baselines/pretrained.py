@@ -239,8 +239,9 @@ class MLPPolicy(BatchPolicy):
 OWN_SCALE = np.array([50.0, 1.0, 5.0, 1.0, 0.1, 5.0, 0.1, 1.0 / 300.0, 1.0 / 300.0, 0.1])
 #: Fixed scales of a slot's entries (link bit, θ_j − θ_i [m], ẋ_j − ẋ_i [m/s], age [s]).
 SLOT_SCALE = np.array([1.0, 50.0, 2.0, 10.0])
-#: ``predicted_inputs``' scales of ``TRANSMIT_FEATURES``: the budget's share as it is, seconds by 10 as ages.
-TRAFFIC_SCALE = np.array([1.0, 10.0])
+#: ``predicted_inputs``' scales of ``TRANSMIT_FEATURES``: the budget's share as it is, seconds by 10 as ages,
+#: the prediction drift in metres as it is.
+TRAFFIC_SCALE = np.array([1.0, 10.0, 1.0])
 #: A slot network's slot inputs (link bit, Δθ, Δẋ, age) as a neighbour in agreement has them, by
 #: multiplication: Δθ = Δẋ = 0, the link bit and the age kept (``zero_at_agreement``).
 AGREEMENT_MASK = np.array([1.0, 0.0, 0.0, 1.0])

@@ -961,6 +961,12 @@ class StepKernel:
             np.zeros((num_envs, config.n_vessels, 4)),
         )
 
+    @property
+    def sent_track(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(θ, ẋ)``, each ``(B, N)``, of the last ``run``'s control instant as the channel saw them (of the
+        measurement, ẋ over ground): with a channel, what each vessel broadcast or would have."""
+        return self._scratch
+
     def run(
         self,
         state: np.ndarray,

@@ -64,7 +64,7 @@ import numpy as np
 
 from marine_formation_env.actions import map_actions
 from marine_formation_env.backends import resolve_backend
-from marine_formation_env.channel import ATTEMPTED, COUNTERS, DELIVERED, SENT, LinkChannel
+from marine_formation_env.channel import ATTEMPTED, COUNTERS, DELIVERED, SENT, LinkChannel, prediction_error
 from marine_formation_env.control import (
     curved_heading_inputs,
     curved_path_following_inputs,
@@ -96,6 +96,7 @@ from marine_formation_env.rules import (
     LANE_OFFSET,
     LINK,
     LOOKAHEAD,
+    MAX_DRIFT,
     VELOCITY,
     along_track,
     cost_term,
@@ -509,7 +510,7 @@ class FormationCore:
         )
         components = dict(zip(REWARD_COMPONENTS[:-1], comps, strict=True))  # communication: ``step`` adds it
         if cfg.transmit:  # the kernel writes the own part and the slots
-            self._traffic(obs, slice(None))
+            self._traffic(obs, slice(None), *self._kernel.sent_track)
         terminated = flags[:, 0] | flags[:, 1]
         return StepOutput(
             observation=obs,
@@ -692,7 +693,7 @@ class FormationCore:
             for k, feature in enumerate(self.channel.slots(ids, self._slot_index, time, theta, x_dot)):
                 slots[..., k] = feature
             if cfg.transmit:
-                self._traffic(out, ids)
+                self._traffic(out, ids, theta, x_dot)
         return np.clip(out, self.obs_low, self.obs_high, out=out)
 
     def messages(self, env_ids: np.ndarray | slice | None = None) -> dict[str, np.ndarray]:
@@ -724,12 +725,16 @@ class FormationCore:
         np.multiply(counts[:, SENT], self.config.channel.message_bits, out=block[..., -1])
         return block
 
-    def _traffic(self, obs: np.ndarray, ids: np.ndarray | slice) -> None:
-        """Write ``TRANSMIT_FEATURES`` into the last entries of observations ``obs`` of formations ``ids``."""
+    def _traffic(self, obs: np.ndarray, ids: np.ndarray | slice, theta: np.ndarray, x_dot: np.ndarray) -> None:
+        """Write ``TRANSMIT_FEATURES`` into the last entries of observations ``obs`` of formations ``ids``,
+        whose vessels measure ``theta``, ``x_dot`` ``(len(ids), N)`` of themselves (what they would send)."""
         channel = self.channel
         assert channel is not None
-        obs[..., -2] = channel.tokens[ids] / channel.channel.bucket
-        obs[..., -1] = np.minimum(self.time[ids][:, None] - channel.sent_time[ids], self.config.horizon)
+        elapsed = self.time[ids][:, None] - channel.sent_time[ids]
+        obs[..., -3] = channel.tokens[ids] / channel.channel.bucket
+        obs[..., -2] = np.minimum(elapsed, self.config.horizon)
+        drift = prediction_error(theta, x_dot, channel.sent_theta[ids], channel.sent_xdot[ids], elapsed)
+        obs[..., -1] = np.minimum(drift, MAX_DRIFT)  # ∞ before a vessel's first broadcast
 
     def links_up(self, b: int) -> np.ndarray:
         """``(N, N)`` booleans of formation ``b``: ``[j, i]`` iff the link i → j exists now."""

@@ -131,10 +131,14 @@ class MarineFormationParallelEnv(ParallelEnv[str, np.ndarray, np.ndarray]):
     trains on several team sizes in one batch and runs on a larger team
     without padding; the default, M = n − 1, is the layout above.
 
-    With ``transmit=True`` the observation ends with two more entries: the share
-    of the vessel's token bucket left (in [0, 1]; 1 without a budget) and the
-    time since its last broadcast, or since reset before the first [s, 0 to
-    horizon]; the space is ``(10 + 4·M + 2,)``.
+    With ``transmit=True`` the observation ends with three more entries: the
+    share of the vessel's token bucket left (in [0, 1]; 1 without a budget),
+    the time since its last broadcast, or since reset before the first [s, 0
+    to horizon], and how far what its neighbours predict of it from that
+    broadcast is off, ``max(|θ_j − θ̂_j| [m], |ẋ_j − ẋ̂_j| [m/s]·1 s)`` with
+    ``θ̂_j = θ_s + ẋ_s·age`` (the event-triggered rule's quantity, 0 right
+    after a broadcast, at most 10 m and 10 m before the first); the space is
+    ``(10 + 4·M + 3,)``.
 
     Nothing else of another vessel reaches ``j``: what ``i`` transmits is
     ``(x_i, ẋ_i)`` (docs/model.md §3), given relative to ``j``. ``state()`` returns the

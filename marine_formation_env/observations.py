@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from marine_formation_env.rules import OWN_FEATURES, SLOT_FEATURES, TRANSMIT_FEATURES
+from marine_formation_env.rules import MAX_DRIFT, OWN_FEATURES, SLOT_FEATURES, TRANSMIT_FEATURES
 from marine_formation_env.scenarios import ScenarioConfig
 
 __all__ = ["MIN_CURVATURE_BOUND", "TRANSMIT_FEATURES", "ObservationLayout", "observation_bounds", "observation_space"]
@@ -109,7 +109,7 @@ def observation_bounds(config: ScenarioConfig) -> tuple[np.ndarray, np.ndarray]:
     dxdot = 2.0 * np.sqrt(2.0) * cfg.max_speed
     slot_low = [0.0, -dtheta, -dxdot, 0.0]
     slot_high = [1.0, dtheta, dxdot, cfg.horizon]
-    traffic_low, traffic_high = ([0.0, 0.0], [1.0, cfg.horizon]) if cfg.transmit else ([], [])
+    traffic_low, traffic_high = ([0.0, 0.0, 0.0], [1.0, cfg.horizon, MAX_DRIFT]) if cfg.transmit else ([], [])
     low = np.array(own_low + slot_low * cfg.observation_slots + traffic_low, dtype=np.float32)
     high = np.array(own_high + slot_high * cfg.observation_slots + traffic_high, dtype=np.float32)
     return low, high
@@ -126,8 +126,9 @@ def observation_space(config: ScenarioConfig, joint: bool = False) -> spaces.Box
     max |D_y|); link bits in
     [0, 1]; coordination differences within the workspace's x-extent plus the
     spread of D_x; ẋ differences within ±2√2·max_speed; ages in
-    [0, horizon]; with ``transmit`` the budget left in [0, 1] and the time
-    since the last broadcast in [0, horizon]. A formation that leaves the workspace or the speed/yaw-rate
+    [0, horizon]; with ``transmit`` the budget left in [0, 1], the time
+    since the last broadcast in [0, horizon] and the prediction drift in
+    [0, ``MAX_DRIFT``] m. A formation that leaves the workspace or the speed/yaw-rate
     envelope terminates, so only its last observation can reach past the
     bounds, and it is clipped to them.
     """

@@ -35,6 +35,7 @@ __all__ = [
     "LANE_OFFSET",
     "LINK",
     "LOOKAHEAD",
+    "MAX_DRIFT",
     "OWN_FEATURES",
     "OWN_SIZE",
     "SLOT_FEATURES",
@@ -93,8 +94,13 @@ LINK, COORDINATION, VELOCITY, AGE = (
 
 
 #: The entries after the slots when each vessel decides when to broadcast (``ScenarioConfig.transmit``): the
-#: share of its token bucket left and the time since its last broadcast [s].
-TRANSMIT_FEATURES = ("budget_left", "since_broadcast")
+#: share of its token bucket left, the time since its last broadcast [s], and how far its neighbours'
+#: prediction of it from that broadcast is off (``channel.prediction_error``, the event-triggered rule's
+#: quantity) [m], at most ``MAX_DRIFT``.
+TRANSMIT_FEATURES = ("budget_left", "since_broadcast", "prediction_drift")
+#: The largest ``prediction_drift`` observed [m]: a vessel this far from what the others predict of it (or
+#: one that has not broadcast since reset) sees this value.
+MAX_DRIFT = 10.0
 
 
 def traffic_entries(dim: int) -> int:

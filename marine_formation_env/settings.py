@@ -300,8 +300,9 @@ class Settings:
             graph network) trains on several team sizes at once.
         transmit: each vessel's policy decides when it broadcasts: its action
             gets a last entry, ``transmit`` (> 0: broadcast now), and its
-            observation two last entries, the share of its budget left and the
-            time since its last broadcast [s] (``marine_formation_env.channel``).
+            observation three last entries, the share of its budget left, the
+            time since its last broadcast [s] and how far its neighbours'
+            prediction of it has drifted since [m] (``marine_formation_env.channel``).
             False: the channel's rule decides (periodic or event-triggered).
     """
 

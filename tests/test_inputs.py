@@ -50,13 +50,13 @@ def test_over_an_ideal_link_the_map_only_rescales_and_reads_the_lane_offset_thro
 
 
 def test_a_size_that_is_not_own_plus_slots_is_refused_by_both_twins():
-    with pytest.raises(ValueError, match="an observation of size 13 is not 10 \\+ 4·slots"):
-        predicted_inputs(np.zeros(13))
+    with pytest.raises(ValueError, match="an observation of size 12 is not 10 \\+ 4·slots"):
+        predicted_inputs(np.zeros(12))
     torch = pytest.importorskip("torch")
     from training.inputs import PredictedInputs
 
-    with pytest.raises(ValueError, match="an observation of size 13 is not 10 \\+ 4·slots"):
-        PredictedInputs()(torch.zeros(2, 13))
+    with pytest.raises(ValueError, match="an observation of size 12 is not 10 \\+ 4·slots"):
+        PredictedInputs()(torch.zeros(2, 12))
 
 
 def test_the_torch_module_is_the_numpy_map():
@@ -135,11 +135,12 @@ def _acoustic_observations() -> np.ndarray:
     return np.concatenate(seen).astype(np.float64)
 
 
-def test_with_transmit_the_budget_and_the_time_since_broadcast_pass_through_at_their_scale():
-    obs = np.concatenate([_own(), [1.0, -10.0, 1.0, 2.5], [0.25, 7.0]])  # budget left 25 %, 7 s since broadcast
+def test_with_transmit_the_budget_the_time_since_broadcast_and_the_drift_pass_through_at_their_scale():
+    # budget left 25 %, 7 s since broadcast, the neighbours' prediction 0.3 m off
+    obs = np.concatenate([_own(), [1.0, -10.0, 1.0, 2.5], [0.25, 7.0, 0.3]])
     out = predicted_inputs(obs)
-    np.testing.assert_allclose(out[:-2], predicted_inputs(obs[:-2]), rtol=1e-12)
-    np.testing.assert_allclose(out[-2:], [0.25, 0.7], rtol=1e-12)  # TRAFFIC_SCALE: as it is, seconds by 10
+    np.testing.assert_allclose(out[:-3], predicted_inputs(obs[:-3]), rtol=1e-12)
+    np.testing.assert_allclose(out[-3:], [0.25, 0.7, 0.3], rtol=1e-12)  # TRAFFIC_SCALE: seconds by 10, else as is
     torch = pytest.importorskip("torch")
     from training.inputs import PredictedInputs
 

@@ -224,17 +224,33 @@ def test_the_budget_presets_are_exceeded_several_times_over_by_periodic_broadcas
 # --------------------------------------------------------------------------- the transmit action
 
 
-def test_transmit_decides_and_the_observation_says_budget_and_age():
+def _track(states, cfg):
+    """``θ = x − D_x`` and ``ẋ = u cos ψ − v sin ψ`` of recorded states ``(..., N, 6)`` (docs/model.md, (20))."""
+    x, psi, u, v = (states[..., k] for k in (0, 2, 3, 4))
+    return x - cfg.formation[:, 0], u * np.cos(psi) - v * np.sin(psi)
+
+
+def test_transmit_decides_and_the_observation_says_budget_age_and_drift():
     cfg = make_config("paper_budget", transmit=True, **SHORT)
     assert cfg.action_dim == 2 and cfg.control_dim == 1
+    assert cfg.sensor_noise.is_zero  # what a vessel sends is its state
     silent = np.tile([0.0, -1.0], (2, 3, 1))  # speed command 0, never transmit
-    _, outs, _, times = run_core(cfg, 8, actions=silent)
+    _, outs, states, times = run_core(cfg, 8, actions=silent)
     assert not counts(outs, "messages_attempted").any()  # only the reset instant's broadcast
     obs = outs[-1].observation
-    np.testing.assert_allclose(obs[..., -2], np.minimum(384 - 96 + 8 * 24, 384) / 384)  # bucket refilled
-    np.testing.assert_allclose(obs[..., -1], np.broadcast_to(times[-1][:, None], (2, 3)))  # since reset
+    np.testing.assert_allclose(obs[..., -3], np.minimum(384 - 96 + 8 * 24, 384) / 384)  # bucket refilled
+    np.testing.assert_allclose(obs[..., -2], np.broadcast_to(times[-1][:, None], (2, 3)))  # since reset
+    # the drift: what the others predict from the reset instant's broadcast, θ_0 + ẋ_0·t, against θ, ẋ now
+    (theta0, xdot0), (theta, xdot) = _track(states[0], cfg), _track(states[-1], cfg)
+    drift = np.maximum(np.abs(theta - theta0 - xdot0 * times[-1][:, None]), np.abs(xdot - xdot0))
+    assert 0.01 < drift.min() and drift.max() < 10.0  # neither 0 nor at the bound: the check can tell
+    np.testing.assert_allclose(obs[..., -1], drift, rtol=1e-5, atol=1e-5)  # float32 observations
     loud = np.tile([0.0, 1.0], (2, 3, 1))
-    sent = counts(run_core(cfg, 8, actions=loud)[1], "messages_sent")
+    loud_outs = run_core(cfg, 8, actions=loud)[1]
+    sent = counts(loud_outs, "messages_sent")
+    for out, now in zip(loud_outs, sent, strict=True):  # a vessel that has just broadcast is predicted exactly
+        assert np.all(out.observation[..., -1][now == 1] == 0.0)
+        assert np.all(out.observation[..., -1][now == 0] > 0.0)
     budget_only = make_config("paper_budget", **SHORT)
     periodic = counts(run_core(budget_only, 8, actions=np.zeros((2, 3, 1)))[1], "messages_sent")
     np.testing.assert_array_equal(sent, periodic)  # always transmitting is periodic broadcasting under the budget
@@ -347,6 +363,27 @@ def test_compiled_and_numpy_backends_count_alike():
                 np.testing.assert_array_equal(a, b, err_msg=key)
             else:
                 assert np.abs(a.sum(axis=0) - b.sum(axis=0)).max() <= (96 if key == "bits_sent" else 1), key
+
+
+@pytest.mark.backend_independent
+def test_compiled_and_numpy_backends_observe_the_transmit_entries_alike():
+    """Random transmit decisions over TDMA links with a budget and sensor noise: the budget left, the age and
+    the drift (of the noisy measurement the channel sent) agree within float32 rounding, on both paths of the
+    compiled backend (its kernel's step and the numpy reset)."""
+    pytest.importorskip("numba")
+    cfg = make_config("acoustic_budget", transmit=True, sensor_noise={"position": 0.5, "speed": 0.05}, **SHORT)
+    rng = np.random.default_rng(0)
+    actions = [rng.uniform(-1.0, 1.0, (2, 3, 2)) for _ in range(40)]
+    observed = []
+    for backend in ("numba", "numpy"):
+        core = FormationCore(cfg, num_envs=2, backend=backend)
+        core.seed_channel([0, 1])
+        obs = [core.reset(sample_initial_states(cfg, [np.random.default_rng(s) for s in (0, 1)]))]
+        obs += [core.step(a).observation for a in actions]
+        observed.append(np.array(obs)[..., -3:])
+    fast, slow = observed
+    assert 0.0 < slow[..., 2].mean() < 10.0  # the drift is neither always 0 nor always at its bound
+    np.testing.assert_allclose(fast, slow, rtol=1e-5, atol=1e-5)
 
 
 @pytest.mark.backend_independent  # the compiled pass covers it; test_backends the agreement
