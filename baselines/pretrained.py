@@ -323,9 +323,21 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
 
     ``weights`` holds ``message_w0, message_b0, message_w1, message_b1, own_w0, own_b0``, and
     ``zero_at_agreement`` (1) if each message is measured from that of a neighbour with Δθ = Δẋ = 0
-    (``SlotFeatures(zero_at_agreement=True)``).
+    (``SlotFeatures(zero_at_agreement=True)``). With ``transmit`` (``TRANSMIT_FEATURES`` after the slots)
+    ψ reads them too, divided by ``TRAFFIC_SCALE``: ``own_w0`` then has ``OWN_SIZE + 3`` rows.
+
+    Raises:
+        ValueError: ``own_w0``'s rows do not match the observation's own part (and traffic entries).
     """
-    own, slots = own_and_slots(obs)
+    obs = np.asarray(obs, dtype=np.float64)
+    traffic = traffic_entries(obs.shape[-1])
+    rows = weights["own_w0"].shape[0]
+    if rows != OWN_SIZE + traffic:
+        raise ValueError(
+            f"the slot network reads {rows} own inputs, this observation of size {obs.shape[-1]} has"
+            f" {OWN_SIZE} + {traffic} (transmit entries)"
+        )
+    own, slots = own_and_slots(obs[..., : obs.shape[-1] - traffic])
     heard = (slots[..., :1] > 0.5).astype(np.float64)
     own_k = np.broadcast_to(own[..., None, :], (*slots.shape[:-1], own.shape[-1]))
     messages = _message(np.concatenate([own_k, slots], axis=-1), weights)
@@ -335,6 +347,8 @@ def slot_features(obs: np.ndarray, weights: dict[str, np.ndarray]) -> np.ndarray
     messages = messages * heard
     total = messages.sum(axis=-2)
     mean = total / np.maximum(heard.sum(axis=-2), 1.0)
+    if traffic:
+        own = np.concatenate([own, obs[..., -traffic:] / TRAFFIC_SCALE], axis=-1)
     return np.concatenate([np.tanh(own @ weights["own_w0"] + weights["own_b0"]), total, mean], axis=-1)
 
 

@@ -23,6 +23,7 @@ from baselines.pretrained import (
     SLOT_SCALE,
     MLPPolicy,
     load_pretrained,
+    own_inputs,
     slot_features,
 )
 from marine_formation_env import parallel_env
@@ -78,6 +79,30 @@ def test_the_numpy_slot_features_are_the_torch_extractor_s():
         theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
     np.testing.assert_allclose(slot_features(obs, _numpy_weights(extractor)), theirs, atol=2e-5)  # float32 rounding
     assert theirs.shape == (64, 48)
+
+
+def test_with_transmit_entries_the_own_layer_reads_them_and_the_messages_do_not():
+    torch.manual_seed(4)
+    box = spaces.Box(-np.inf, np.inf, (OWN_SIZE + SLOT_SIZE * 2 + 3,), np.float32)
+    extractor = SlotFeatures(box, hidden=16)
+    weights = _numpy_weights(extractor)
+    assert weights["own_w0"].shape == (OWN_SIZE + 3, 16)
+    rng = np.random.default_rng(4)
+    plain = _observations(rng, 32, 2)
+    traffic = np.column_stack([rng.random(32), 40.0 * rng.random(32), 10.0 * rng.random(32)])  # share, s, m
+    obs = np.concatenate([plain, traffic], axis=1)
+    features = slot_features(obs, weights)
+    # ψ by hand: one tanh layer over the own inputs and the traffic entries at their scales (share as it is,
+    # seconds by 10, metres as they are)
+    own_in = np.concatenate([own_inputs(plain[:, :OWN_SIZE]), traffic / [1.0, 10.0, 1.0]], axis=1)
+    np.testing.assert_allclose(features[:, :16], np.tanh(own_in @ weights["own_w0"] + weights["own_b0"]), atol=1e-12)
+    no_traffic = {**weights, "own_w0": weights["own_w0"][:OWN_SIZE]}
+    np.testing.assert_allclose(features[:, 16:], slot_features(plain, no_traffic)[:, 16:], atol=1e-12)
+    with torch.no_grad():
+        theirs = extractor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(theirs, features, atol=2e-5)  # float32 rounding
+    with pytest.raises(ValueError, match="reads 13 own inputs, this observation of size 18 has 10 \\+ 0"):
+        slot_features(plain, weights)
 
 
 def _agreeing(rng: np.random.Generator, batch: int, slots: int) -> tuple[np.ndarray, np.ndarray]:

@@ -410,6 +410,27 @@ def test_train_main_requires_config(tmp_path, capsys):
     assert "--config" in capsys.readouterr().err
 
 
+def test_transmit_bias_starts_the_transmit_mean_there_and_needs_the_transmit_entry():
+    raw = {**base_config(), "scenario": "paper_budget", "transmit_bias": 2.0}
+    raw["env_kwargs"] = {**raw["env_kwargs"], "action_level": "speed", "transmit": True}
+    resolved = validate(raw)
+    venv = train_module.build_env(resolved, 0)
+    try:
+        model = train_module.build_model(resolved, venv, 0)
+        obs = np.zeros((4, venv.observation_space.shape[0]), dtype=np.float32)
+        mean = model.policy.get_distribution(model.policy.obs_to_tensor(obs)[0]).distribution.mean
+        # SB3 starts its action layer with gain 0.01 and a zero bias: the speed entry's mean near 0, the
+        # transmit entry's at the bias
+        np.testing.assert_allclose(mean[:, -1].detach().numpy(), 2.0, atol=0.05)
+        assert float(mean[:, 0].abs().max()) < 0.05
+    finally:
+        venv.close()
+    with pytest.raises(TrainConfigError, match="transmit_bias = 2.0 sets the transmit entry's initial mean, but"):
+        validate({**base_config(), "transmit_bias": 2.0})
+    with pytest.raises(TrainConfigError, match="transmit_bias must be a number or null, got 'high'"):
+        validate({**raw, "transmit_bias": "high"})
+
+
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
 def test_shipped_config_validates(path):
     # what `python -m training.train --config <path>` does first

@@ -81,7 +81,9 @@ class ReferenceEvalCallback(BaseCallback):
         self.episodes = int(episodes)
         self.seeds = development_seeds(self.episodes)
         self.out_dir = Path(out_dir)
-        self.reference = summarize(evaluate_policy_episodes(self.env, ReferencePolicy(self.env), self.seeds))
+        # where the policy decides when to broadcast (transmit), the reference broadcasts by the channel's rule
+        periodic = parallel_env(scenario, **{**env_kwargs, "transmit": False}) if self.env.config.transmit else self.env
+        self.reference = summarize(evaluate_policy_episodes(periodic, ReferencePolicy(periodic), self.seeds))
         self.best = -np.inf
         self._last = 0
 

@@ -86,6 +86,7 @@ __all__ = [
     "check_ppo_keys",
     "check_renamed",
     "check_train_reward",
+    "check_transmit_bias",
     "config_differences",
     "curriculum_spread",
     "load_config",
@@ -110,6 +111,7 @@ SPECIAL_KEYS = {
     "teams": [],
     "train_reward": {},
     "initial_state_curriculum": None,
+    "transmit_bias": None,
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -328,6 +330,20 @@ def check_train_reward(cfg: dict[str, Any]) -> None:
             raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
 
+def check_transmit_bias(value: Any, transmit: bool) -> float | None:
+    """``transmit_bias`` checked: null, or a number for a scenario whose action has the ``transmit`` entry."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise TrainConfigError(f"transmit_bias must be a number or null, got {value!r}")
+    if not transmit:
+        raise TrainConfigError(
+            f"transmit_bias = {value!r} sets the transmit entry's initial mean, but the action has none"
+            " (set env_kwargs: {transmit: true})"
+        )
+    return float(value)
+
+
 def check_curriculum(value: Any) -> dict[str, float] | None:
     """``initial_state_curriculum`` checked: null, or ``{start: [0, 1], until: (0, 1]}`` (both keys).
 
@@ -444,9 +460,12 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     if not isinstance(resolved["env_kwargs"], dict):
         raise TrainConfigError(f"env_kwargs must be a mapping, got {resolved['env_kwargs']!r}")
     try:
-        make_config(resolved["scenario"], **resolved["env_kwargs"])
+        scenario = make_config(resolved["scenario"], **resolved["env_kwargs"])
     except ConfigError as err:
         raise TrainConfigError(f"env_kwargs: {err}") from None
+    resolved["transmit_bias"] = check_transmit_bias(resolved["transmit_bias"], scenario.transmit)
+    if resolved["transmit_bias"] is not None and resolved["algo"] not in ("ppo", "a2c"):
+        raise TrainConfigError(f"transmit_bias sets a Gaussian policy's mean (ppo, a2c), not {resolved['algo']}'s")
     if not isinstance(resolved["policy_kwargs"], dict):
         raise TrainConfigError(f"policy_kwargs must be a mapping, got {resolved['policy_kwargs']!r}")
     act = resolved["policy_kwargs"].get("activation_fn")

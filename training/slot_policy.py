@@ -23,7 +23,9 @@ them as a set:
   (20) sums over the in-neighbours, the mean keeps the scale when a vessel
   hears many;
 * the features are ``[ψ(own), sum, mean]``; SB3's ``net_arch`` layers and
-  action head follow, as for ``MlpPolicy``;
+  action head follow, as for ``MlpPolicy``; with ``transmit`` the
+  observation's last entries (``TRANSMIT_FEATURES``, divided by
+  ``TRAFFIC_SCALE``) are read by ψ beside the own inputs, not by the messages;
 * with ``zero_at_agreement = True`` (default False) each message is measured
   from the message of a neighbour in agreement, ``m_k = φ([own, slot_k]) −
   φ([own, slot_k⁰])``, where ``slot_k⁰`` keeps the link bit and the age but
@@ -54,8 +56,8 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from baselines.pretrained import AGREEMENT_MASK, OWN_SCALE, SLOT_SCALE
-from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, slot_count
+from baselines.pretrained import AGREEMENT_MASK, OWN_SCALE, SLOT_SCALE, TRAFFIC_SCALE
+from marine_formation_env.rules import OWN_SIZE, SLOT_SIZE, traffic_entries
 from training.inputs import own_and_slots
 
 __all__ = ["SlotFeatures"]
@@ -70,27 +72,32 @@ class SlotFeatures(BaseFeaturesExtractor):
         hidden: int = 64,
         zero_at_agreement: bool = False,
     ) -> None:
-        slot_count(int(observation_space.shape[0]))  # refuses a size that is not own part + whole slots
+        traffic = traffic_entries(int(observation_space.shape[0]))  # refuses a size that is not own + slots (+ traffic)
         if not isinstance(zero_at_agreement, bool):
             raise ValueError(f"zero_at_agreement must be True or False, got {zero_at_agreement!r}")
         super().__init__(observation_space, features_dim=3 * hidden)
         self.hidden = hidden
         self.zero_at_agreement = zero_at_agreement
+        self.traffic = traffic
         self.own_scale: torch.Tensor
         self.slot_scale: torch.Tensor
         self.agreement_mask: torch.Tensor
+        self.traffic_scale: torch.Tensor
         self.register_buffer("own_scale", torch.tensor(OWN_SCALE, dtype=torch.float32))
         self.register_buffer("slot_scale", torch.tensor(SLOT_SCALE, dtype=torch.float32))
+        if traffic:  # a constant, as the agreement mask
+            self.register_buffer("traffic_scale", torch.tensor(TRAFFIC_SCALE, dtype=torch.float32), persistent=False)
         if zero_at_agreement:  # not saved (persistent=False): it is a constant, and old state_dicts load strictly
             self.register_buffer("agreement_mask", torch.tensor(AGREEMENT_MASK, dtype=torch.float32), persistent=False)
         self.message = nn.Sequential(
             nn.Linear(OWN_SIZE + SLOT_SIZE, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh()
         )
-        self.own = nn.Sequential(nn.Linear(OWN_SIZE, hidden), nn.Tanh())
+        self.own = nn.Sequential(nn.Linear(OWN_SIZE + traffic, hidden), nn.Tanh())
 
     def forward(self, observations: torch.Tensor) -> torch.Tensor:
         # Δθ predicted to now, κ·D_y, fixed scales (training.inputs; a bad size raises there)
-        own, slots = own_and_slots(observations, self.own_scale, self.slot_scale)
+        dim = observations.shape[-1] - self.traffic
+        own, slots = own_and_slots(observations[..., :dim], self.own_scale, self.slot_scale)
         heard = (slots[..., :1] > 0.5).to(observations.dtype)  # (..., K, 1): the link bits
         own_k = own.unsqueeze(-2).expand(*slots.shape[:-1], own.shape[-1])
         messages = self.message(torch.cat([own_k, slots], dim=-1))
@@ -100,4 +107,8 @@ class SlotFeatures(BaseFeaturesExtractor):
         messages = messages * heard
         total = messages.sum(dim=-2)
         mean = total / heard.sum(dim=-2).clamp(min=1.0)
-        return torch.cat([self.own(own), total, mean], dim=-1)
+        if self.traffic:
+            own_in = torch.cat([own, observations[..., dim:] / self.traffic_scale], dim=-1)
+        else:
+            own_in = own
+        return torch.cat([self.own(own_in), total, mean], dim=-1)

@@ -21,6 +21,7 @@ from training.config import (
     check_ppo_keys,
     check_renamed,
     check_train_reward,
+    check_transmit_bias,
     curriculum_spread,
     parse_schedule,
     training_env_kwargs,
@@ -146,15 +147,7 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(
             f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
         )
-    if cfg["transmit_bias"] is not None:
-        if isinstance(cfg["transmit_bias"], bool) or not isinstance(cfg["transmit_bias"], (int, float)):
-            raise TrainConfigError(f"transmit_bias must be a number or null, got {cfg['transmit_bias']!r}")
-        if not scenario.transmit:
-            raise TrainConfigError(
-                f"transmit_bias = {cfg['transmit_bias']!r} sets the transmit entry's initial mean, but the action"
-                " has none (set env_kwargs: {transmit: true})"
-            )
-        cfg["transmit_bias"] = float(cfg["transmit_bias"])
+    cfg["transmit_bias"] = check_transmit_bias(cfg["transmit_bias"], scenario.transmit)
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
     if cfg["train_dt"] is not None:

@@ -133,7 +133,7 @@ def build_model(resolved: dict[str, Any], venv: Any, seed: int, verbose: int = 0
     """The algorithm on ``venv``; whatever its constructor rejects becomes a ``TrainConfigError``."""
     cls = algo_class(resolved["algo"])
     try:
-        return cls(
+        model = cls(
             resolved["policy"],
             venv,
             seed=seed,
@@ -144,6 +144,12 @@ def build_model(resolved: dict[str, Any], venv: Any, seed: int, verbose: int = 0
         )
     except Exception as err:
         raise TrainConfigError(f"{resolved['algo']} rejects this config: {type(err).__name__}: {err}") from None
+    if resolved.get("transmit_bias") is not None:  # the Gaussian's mean of the last action entry starts there
+        import torch
+
+        with torch.no_grad():
+            model.policy.action_net.bias[-1] = resolved["transmit_bias"]
+    return model
 
 
 def check_buildable(resolved: dict[str, Any], seed: int) -> None:
