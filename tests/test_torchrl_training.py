@@ -385,13 +385,18 @@ def test_a_state_independent_scale_starts_at_initial_scale_whatever_the_observat
     assert len(learned) == 1  # one log-deviation per action entry, trained with the policy
 
 
+def _built_alike(options: dict, **variant) -> tuple:
+    """Two actors ``(7 inputs, 2 actions)`` from the same seed: ``options``, and ``options`` with ``variant``."""
+    torch.manual_seed(5)
+    plain = networks.policy_network(7, 2, **options)
+    torch.manual_seed(5)
+    return plain, networks.policy_network(7, 2, **options, **variant)
+
+
 def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_its_bias():
     # the same seed builds the same hidden layers; only the output layer differs: loc = gain · (W h), W h = loc₀ − b₀
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
-    torch.manual_seed(5)
-    plain = networks.policy_network(7, 2, **SMALL)
-    torch.manual_seed(5)
-    small = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01)
+    plain, small = _built_alike(SMALL, action_head_gain=0.01)
     *_, bias = networks.shared_trunk(plain).parameters()
     with torch.no_grad():
         loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
@@ -403,10 +408,7 @@ def test_transmit_bias_starts_the_last_entry_s_mean_there_in_the_env_s_units():
     # the same seed builds the same network; only the last entry's bias differs, by the bias in network units
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     options = {**SMALL, "action_head_gain": 0.01, "scale": "state_independent", "action_scale": [0.2, 0.5]}
-    torch.manual_seed(5)
-    plain = networks.policy_network(7, 2, **options)
-    torch.manual_seed(5)
-    biased = networks.policy_network(7, 2, **options, transmit_bias=2.0)
+    plain, biased = _built_alike(options, transmit_bias=2.0)
     with torch.no_grad():
         a, b = plain(obs.clone())["vessel", "loc"], biased(obs.clone())["vessel", "loc"]
     torch.testing.assert_close(b[..., 0], a[..., 0])
@@ -418,11 +420,8 @@ def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units()
     # per action entry, and nothing of it is learned
     obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
     k = torch.tensor([0.2, 0.05])
-    torch.manual_seed(5)
-    plain = networks.policy_network(7, 2, **SMALL, action_head_gain=0.01, scale="state_independent")
-    torch.manual_seed(5)
-    scaled = networks.policy_network(
-        7, 2, **SMALL, action_head_gain=0.01, scale="state_independent", action_scale=[0.2, 0.05]
+    plain, scaled = _built_alike(
+        {**SMALL, "action_head_gain": 0.01, "scale": "state_independent"}, action_scale=[0.2, 0.05]
     )
     with torch.no_grad():
         a, b = plain(obs.clone()), scaled(obs.clone())

@@ -425,7 +425,7 @@ def test_transmit_bias_starts_the_transmit_mean_there_and_needs_the_transmit_ent
         assert float(mean[:, 0].abs().max()) < 0.05
     finally:
         venv.close()
-    with pytest.raises(TrainConfigError, match="transmit_bias = 2.0 sets the transmit entry's initial mean, but"):
+    with pytest.raises(TrainConfigError, match=r"transmit_bias = 2\.0 sets the transmit entry's initial mean, but"):
         validate({**base_config(), "transmit_bias": 2.0})
     with pytest.raises(TrainConfigError, match="transmit_bias must be a number or null, got 'high'"):
         validate({**raw, "transmit_bias": "high"})
