@@ -210,7 +210,6 @@ def test_baselines_evaluate_loads_the_run_folder_next_to_the_reference(tmp_path)
         ),
         ("initial_state_curriculum={'start': 0.1}", "initial_state_curriculum must be null or a mapping with the keys"),
         ("train_dt=0", "train_dt must be > 0, got 0"),
-        ("transmit_bias=2", "transmit_bias = 2 sets the transmit entry's initial mean, but the action has none"),
         ("train_dt=1000", "train_dt = 1000.0: horizon = 400.0 s must be at least one control period dt = 1000.0 s"),
     ],
 )
@@ -402,17 +401,6 @@ def test_action_head_gain_scales_the_output_layer_s_initial_weights_and_zeroes_i
         loc_plain, loc_small = plain(obs.clone())["vessel", "loc"], small(obs.clone())["vessel", "loc"]
     torch.testing.assert_close(loc_small, 0.01 * (loc_plain - bias[:2]))
     assert float(loc_small.abs().max()) < 0.05  # the first actions' means are near 0 on any observation
-
-
-def test_transmit_bias_starts_the_last_entry_s_mean_there_in_the_env_s_units():
-    # the same seed builds the same network; only the last entry's bias differs, by the bias in network units
-    obs = TensorDict({("vessel", "observation"): 30.0 * torch.randn(64, 3, 7)}, batch_size=[64])
-    options = {**SMALL, "action_head_gain": 0.01, "scale": "state_independent", "action_scale": [0.2, 0.5]}
-    plain, biased = _built_alike(options, transmit_bias=2.0)
-    with torch.no_grad():
-        a, b = plain(obs.clone())["vessel", "loc"], biased(obs.clone())["vessel", "loc"]
-    torch.testing.assert_close(b[..., 0], a[..., 0])
-    torch.testing.assert_close(b[..., 1], a[..., 1] + 2.0)
 
 
 def test_action_scale_turns_the_network_s_gaussian_into_one_in_the_env_s_units():

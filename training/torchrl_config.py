@@ -21,7 +21,6 @@ from training.config import (
     check_ppo_keys,
     check_renamed,
     check_train_reward,
-    check_transmit_bias,
     curriculum_spread,
     parse_schedule,
     training_env_kwargs,
@@ -54,7 +53,6 @@ DEFAULTS: dict[str, Any] = {
     "initial_scale": 1.0,
     "scale": "state_dependent",
     "action_head_gain": None,
-    "transmit_bias": None,
     "action_scale": 1.0,
     "learning_rate": 3e-4,
     "target_kl": None,
@@ -147,7 +145,6 @@ def resolve(raw: dict[str, Any], seed: int) -> dict[str, Any]:
         raise TrainConfigError(
             f"action_scale {cfg['action_scale']!r} needs distribution: normal (tanh_normal squashes before it scales)"
         )
-    cfg["transmit_bias"] = check_transmit_bias(cfg["transmit_bias"], scenario.transmit)
     check_train_reward(cfg)
     cfg["initial_state_curriculum"] = check_curriculum(cfg["initial_state_curriculum"])
     if cfg["train_dt"] is not None:

@@ -88,7 +88,6 @@ def actor_options(cfg: dict[str, Any]) -> dict[str, Any]:
         "distribution": str(cfg.get("distribution", "tanh_normal")),
         "initial_scale": float(cfg.get("initial_scale", 1.0)),
         "action_head_gain": cfg.get("action_head_gain"),
-        "transmit_bias": cfg.get("transmit_bias"),
         "scale": str(cfg.get("scale", "state_dependent")),
         "action_scale": cfg.get("action_scale", 1.0),
         "inputs": str(cfg.get("inputs", "raw")),
@@ -106,7 +105,6 @@ def policy_network(
     distribution: str = "tanh_normal",
     initial_scale: float = 1.0,
     action_head_gain: float | None = None,
-    transmit_bias: float | None = None,
     scale: str = "state_dependent",
     action_scale: float | Sequence[float] = 1.0,
     inputs: str = "raw",
@@ -120,9 +118,6 @@ def policy_network(
     With ``action_head_gain`` the MLP's last layer starts with its weights scaled by it and a zero bias, so the
     first actions' means are near 0 and their deviations near ``initial_scale`` (SB3 initializes its action
     layer with gain 0.01; TorchRL's default leaves means of about ±0.1 and more on unscaled observations).
-    With ``transmit_bias`` the mean of the action's last entry (the env's ``transmit``, in its units) starts
-    at that value: its bias in the last layer is set after ``action_head_gain``'s scaling, so a policy that
-    starts at 0 by the gain, with a bias of 2 and a deviation of 1, sends at about 98 % of its opportunities.
     With ``scale="state_independent"`` the network outputs the means only and the deviation is one learned
     parameter per action entry, ``exp`` of a log-deviation that starts at ``log(initial_scale)`` (SB3's Gaussian,
     TensorDict's ``AddStateIndependentNormalScale``).
@@ -169,10 +164,6 @@ def policy_network(
         with torch.no_grad():
             weight.mul_(action_head_gain)
             bias.zero_()
-    if transmit_bias is not None:
-        *_, bias = _trunk_of(net)[-1].parameters()
-        with torch.no_grad():  # the loc of the last entry (the network's first action_dim outputs are the locs)
-            bias[..., action_dim - 1] = transmit_bias / float(units[-1])
     module = TensorDictModule(
         net, in_keys=[("vessel", "observation")], out_keys=[("vessel", "loc"), ("vessel", "scale")]
     )
@@ -319,8 +310,8 @@ def load_torch_policy(folder: str | Path) -> tuple[TorchPolicy, dict[str, Any]]:
         dims = saved["dims"]
         config = json.loads(saved["config"])
         # the shared MLP takes any number of agents: build it for one, each vessel is a batch entry; the head's
-        # initial gain and bias do not matter, the weights are loaded
-        options = {**actor_options(config), "action_head_gain": None, "transmit_bias": None}
+        # initial gain does not matter, the weights are loaded
+        options = {**actor_options(config), "action_head_gain": None}
         actor = policy_network(int(dims["observation"]), int(dims["action"]), n_agents=1, **options)
         actor.load_state_dict(saved["actor"])
     except (KeyError, RuntimeError, ValueError, TypeError, EOFError, pickle.UnpicklingError) as err:
