@@ -212,8 +212,8 @@ def test_the_features_ignore_the_order_of_the_slots_and_empty_padding():
     alone = np.concatenate([own, silent.reshape(32, -1)], axis=1)
     nothing = np.concatenate([own, np.zeros((32, 5 * SLOT_SIZE))], axis=1)
     np.testing.assert_allclose(slot_features(alone, weights), slot_features(nothing, weights), atol=1e-12)
-    with pytest.raises(ValueError, match="an observation of size 13 is not 10 \\+ 4·slots"):
-        slot_features(obs[:, :13], weights)
+    with pytest.raises(ValueError, match="an observation of size 12 is not 10 \\+ 4·slots"):
+        slot_features(obs[:, :12], weights)
 
 
 def test_the_lane_offset_counts_only_through_the_path_s_curvature():
