@@ -237,8 +237,8 @@ def evaluate(
     first: dict[str, Trajectory] = {}
     bar = progress_bar(len(policies) * episodes, progress)
     seeds = [seed + k for k in range(episodes)]
-    for label in policies:
-        policy = make_policy(label, env, seed, loaded)
+    built = {label: make_policy(label, env, seed, loaded) for label in policies}  # every refusal before any episode
+    for label, policy in built.items():
         per_episode, trajectories = episode_reports(policy, policy_config(label, cfg), seeds)
         first[label] = trajectories[0]
         if bar is not None:

@@ -342,6 +342,18 @@ def test_a_policy_that_does_not_send_transmit_is_refused():
         make_config("paper", transmit="yes")
 
 
+def test_the_evaluation_refuses_the_reference_on_a_transmit_scenario_before_any_episode(monkeypatch, capsys):
+    import baselines.evaluate as evaluation
+
+    ran = []
+    monkeypatch.setattr(evaluation, "episode_reports", lambda *args, **kwargs: ran.append(args) or ([], []))
+    with pytest.raises(SystemExit):
+        evaluate_main(["--scenario", "paper_budget", "--set", "transmit=true", "--set", "action_level=speed",
+                       "--policy", "random", "--policy", "reference", "--episodes", "1", "--quiet"])  # fmt: skip
+    assert "does not send the transmit action" in capsys.readouterr().err
+    assert ran == []  # the random policy, listed first, did not run either
+
+
 def test_channel_config_defaults_are_the_ideal_links():
     assert ChannelConfig().is_ideal and ChannelConfig(message_bits=200).is_ideal
     assert not ChannelConfig(event_threshold=0.0).is_ideal
