@@ -381,6 +381,7 @@ TRAFFIC: dict[str, tuple[str, dict[str, Any]]] = {
     "event": ("paper", {"channel": {"event_threshold": 0.5}}),
     "budget": ("paper_budget", {}),
     "acoustic_event_budget": ("acoustic_budget", {"channel": {"event_threshold": 0.5}}),
+    "transmit": ("paper_budget", {"transmit": True}),
 }
 
 
@@ -549,7 +550,8 @@ def format_traffic(report: dict[str, Any]) -> list[str]:
         "",
         "Event-triggered broadcasting and budgets (random force actions; `/ ideal`: over the ideal links of the "
         "same run): `event` is `paper` with δ = 0.5, `budget` is `paper_budget`, `acoustic_event_budget` is "
-        "`acoustic_budget` with δ = 0.5:",
+        "`acoustic_budget` with δ = 0.5, `transmit` is `paper_budget` with the `transmit` action (random, so "
+        "each vessel tries at about half of the periods) and its three observation entries:",
         "",
         "| B | ideal links [env-steps/s] | " + " | ".join(f"{n} [env-steps/s] | {n} / ideal" for n in names) + " |",
         "|---|---|" + "---|---|" * len(names),
