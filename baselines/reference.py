@@ -45,6 +45,7 @@ Two options go beyond the paper (our extensions, off by default):
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -75,7 +76,13 @@ from marine_formation_env.rules import (
 )
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ReferencePolicy", "predicted_coordination_error"]
+__all__ = ["ReferencePolicy", "predicted_coordination_error", "rule_broadcasting"]
+
+
+def rule_broadcasting(config: ScenarioConfig) -> ScenarioConfig:
+    """``config`` for the reference beside a policy that decides when to broadcast: ``transmit`` off, so the
+    channel's rule (periodic, or event-triggered) decides (the reference sends no ``transmit`` entry)."""
+    return dataclasses.replace(config, transmit=False) if config.transmit else config
 
 
 def predicted_coordination_error(own: np.ndarray, slots: np.ndarray) -> np.ndarray:

@@ -431,6 +431,18 @@ def test_transmit_bias_starts_the_transmit_mean_there_and_needs_the_transmit_ent
         validate({**raw, "transmit_bias": "high"})
 
 
+def test_the_evaluation_callback_scores_the_reference_by_the_channel_s_rule_where_the_policy_transmits(tmp_path):
+    from baselines.reference import rule_broadcasting
+    from training.callbacks import ReferenceEvalCallback
+
+    kwargs = {"action_level": "speed", "transmit": True, "horizon": 10.0}
+    callback = ReferenceEvalCallback("paper_budget", kwargs, eval_freq=0, episodes=1, out_dir=tmp_path)
+    assert callback.env.config.transmit  # the learned policy's env keeps the transmit action ...
+    periodic = rule_broadcasting(callback.env.config)  # ... the reference's broadcasts by the budget's rule
+    assert not periodic.transmit and periodic.channel == callback.env.config.channel
+    assert callback.reference["message_rate"]["mean"] > 0.0  # it sent its messages
+
+
 @pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.name)
 def test_shipped_config_validates(path):
     # what `python -m training.train --config <path>` does first

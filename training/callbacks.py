@@ -19,7 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from baselines.engine import episode_reports
 from baselines.metrics import summarize
-from baselines.reference import ReferencePolicy
+from baselines.reference import ReferencePolicy, rule_broadcasting
 from baselines.seeds import development_seeds
 from marine_formation_env.env import parallel_env
 from training import run_folder
@@ -81,9 +81,10 @@ class ReferenceEvalCallback(BaseCallback):
         self.episodes = int(episodes)
         self.seeds = development_seeds(self.episodes)
         self.out_dir = Path(out_dir)
-        # where the policy decides when to broadcast (transmit), the reference broadcasts by the channel's rule
-        periodic = parallel_env(scenario, **{**env_kwargs, "transmit": False}) if self.env.config.transmit else self.env
-        self.reference = summarize(evaluate_policy_episodes(periodic, ReferencePolicy(periodic), self.seeds))
+        periodic = rule_broadcasting(self.env.config)
+        self.reference = summarize(
+            episode_reports(ReferencePolicy(periodic), periodic, self.seeds, backend=self.env.core.backend)[0]
+        )
         self.best = -np.inf
         self._last = 0
 

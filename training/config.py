@@ -86,7 +86,6 @@ __all__ = [
     "check_ppo_keys",
     "check_renamed",
     "check_train_reward",
-    "check_transmit_bias",
     "config_differences",
     "curriculum_spread",
     "load_config",
@@ -330,8 +329,9 @@ def check_train_reward(cfg: dict[str, Any]) -> None:
             raise TrainConfigError(f"train_reward {shaped}: {err}") from err
 
 
-def check_transmit_bias(value: Any, transmit: bool) -> float | None:
-    """``transmit_bias`` checked: null, or a number for a scenario whose action has the ``transmit`` entry."""
+def _transmit_bias(value: Any, transmit: bool, algo: str) -> float | None:
+    """``transmit_bias`` checked: null, or a number for a Gaussian policy (ppo, a2c) of a scenario whose action
+    has the ``transmit`` entry."""
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -341,6 +341,8 @@ def check_transmit_bias(value: Any, transmit: bool) -> float | None:
             f"transmit_bias = {value!r} sets the transmit entry's initial mean, but the action has none"
             " (set env_kwargs: {transmit: true})"
         )
+    if algo not in ("ppo", "a2c"):
+        raise TrainConfigError(f"transmit_bias sets a Gaussian policy's mean (ppo, a2c), not {algo}'s")
     return float(value)
 
 
@@ -463,9 +465,7 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
         scenario = make_config(resolved["scenario"], **resolved["env_kwargs"])
     except ConfigError as err:
         raise TrainConfigError(f"env_kwargs: {err}") from None
-    resolved["transmit_bias"] = check_transmit_bias(resolved["transmit_bias"], scenario.transmit)
-    if resolved["transmit_bias"] is not None and resolved["algo"] not in ("ppo", "a2c"):
-        raise TrainConfigError(f"transmit_bias sets a Gaussian policy's mean (ppo, a2c), not {resolved['algo']}'s")
+    resolved["transmit_bias"] = _transmit_bias(resolved["transmit_bias"], scenario.transmit, resolved["algo"])
     if not isinstance(resolved["policy_kwargs"], dict):
         raise TrainConfigError(f"policy_kwargs must be a mapping, got {resolved['policy_kwargs']!r}")
     act = resolved["policy_kwargs"].get("activation_fn")

@@ -11,7 +11,6 @@ by the ``trainer`` field of its ``config.yaml``.
 
 from __future__ import annotations
 
-import dataclasses
 import pickle
 import zipfile
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from baselines.engine import episode_reports
-from baselines.reference import ReferencePolicy
+from baselines.reference import ReferencePolicy, rule_broadcasting
 from baselines.rollout import BatchPolicy
 from baselines.runs import RunFolderError, load_run, read_config, run_folder_of
 from baselines.seeds import evaluation_seeds
@@ -224,8 +223,7 @@ def evaluation_summary(policy: Any, scenario: str, env_kwargs: dict[str, Any], s
     and success of each, the per-episode returns and the mean action change per step. Where the policy
     decides when to broadcast (``transmit``), the reference broadcasts by the channel's rule."""
     config = parallel_env(scenario, **env_kwargs).config
-    # where the policy decides when to broadcast, the reference broadcasts by the channel's rule
-    periodic = dataclasses.replace(config, transmit=False) if config.transmit else config
+    periodic = rule_broadcasting(config)
     members = {
         **member_metrics({"learned": policy}, config, seeds),
         **member_metrics({"reference": ReferencePolicy(periodic)}, periodic, seeds),
