@@ -26,7 +26,10 @@ reference takes options after a colon, comma-separated: ``extrapolate``
 ``ilos=σ`` (integral LOS with gain σ [m/s], ``ilos`` alone: σ = 1), e.g.
 ``reference:extrapolate,ilos=1.0``; ``event=δ`` runs it with event-triggered
 broadcasting at threshold δ (``channel.event_threshold``) and extrapolating,
-e.g. ``reference:event=0.5``. A
+e.g. ``reference:event=0.5``. ``handover:LEARNED`` runs the learned policy ``LEARNED``
+(pretrained or saved) until each vessel's own observation is settled, then
+the paper's controller (``baselines.handover``), e.g.
+``handover:pretrained:paper_speed``. A
 model or pretrained policy brings its training scenario and env overrides;
 ``--scenario`` and ``--set`` take precedence over them (a pretrained policy
 refuses a team size, action level or observation layout it cannot take). ``--set KEY=VALUE`` overrides any scenario
@@ -53,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from baselines.engine import episode_reports
+from baselines.handover import HANDOVER_PREFIX, HandoverPolicy, is_handover
 from baselines.metrics import summarize
 from baselines.plots import plot_comparison, plot_episode
 from baselines.pretrained import check_compatible, format_listing, list_pretrained, load_pretrained
@@ -141,8 +145,18 @@ def load_model(spec: str) -> tuple[Any, dict[str, Any]]:
     return load_run(spec)
 
 
+def learned_spec(spec: str) -> str:
+    """The learned policy a ``--policy`` value loads: ``LEARNED`` of ``handover:LEARNED``, else the value itself."""
+    return spec[len(HANDOVER_PREFIX) :] if is_handover(spec) else spec
+
+
 def make_policy(spec: str, env: Any, seed: int, loaded: dict[str, Any] | None = None) -> Any:
     """Build a policy from its command-line name (or a loaded model)."""
+    if is_handover(spec):
+        inner = learned_spec(spec)
+        if not (is_pretrained(inner) or is_model_path(inner)):
+            raise ValueError(f"policy {spec!r}: handover needs a learned policy (pretrained:NAME or a saved model)")
+        return HandoverPolicy(make_policy(inner, env, seed, loaded), env)
     if is_reference(spec):
         return ReferencePolicy(policy_config(spec, env.config), **reference_options(spec))
     if spec == "random":
@@ -208,7 +222,7 @@ def evaluate(
         raise ValueError(f"each --policy may appear once, got {list(policies)}")
     loaded: dict[str, Any] = {}
     trained_on: dict[str, Any] = {}
-    for spec in policies:
+    for spec in map(learned_spec, policies):
         if is_pretrained(spec):
             loaded[spec], info = load_pretrained(spec[len(PRETRAINED_PREFIX) :])
             if not trained_on:
@@ -298,7 +312,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="append",
         dest="policies",
         help="policy to run; repeatable: reference[:extrapolate,ilos=σ,event=δ], random, pretrained:NAME, "
-        "or a saved model .zip / run folder",
+        "a saved model .zip / run folder, or handover:LEARNED (that learned policy, then the reference)",
     )
     parser.add_argument("--list-pretrained", action="store_true", help="list the shipped pretrained policies and exit")
     parser.add_argument("--episodes", type=int_at_least(1), default=1, help="episodes per policy (default 1)")
