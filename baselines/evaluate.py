@@ -26,10 +26,10 @@ reference takes options after a colon, comma-separated: ``extrapolate``
 ``ilos=σ`` (integral LOS with gain σ [m/s], ``ilos`` alone: σ = 1), e.g.
 ``reference:extrapolate,ilos=1.0``; ``event=δ`` runs it with event-triggered
 broadcasting at threshold δ (``channel.event_threshold``) and extrapolating,
-e.g. ``reference:event=0.5``. ``handover:LEARNED`` runs the learned policy ``LEARNED``
-(pretrained or saved) until each vessel's own observation is settled, then
-the paper's controller (``baselines.handover``), e.g.
-``handover:pretrained:paper_speed``. A
+e.g. ``reference:event=0.5``. ``handover:LEARNED`` runs the learned policy
+``LEARNED`` (pretrained or saved) until each vessel's own observation has
+been in the success bands for 20 s, then the paper's controller
+(``baselines.handover``), e.g. ``handover:pretrained:paper_speed``. A
 model or pretrained policy brings its training scenario and env overrides;
 ``--scenario`` and ``--set`` take precedence over them (a pretrained policy
 refuses a team size, action level or observation layout it cannot take). ``--set KEY=VALUE`` overrides any scenario

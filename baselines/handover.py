@@ -47,9 +47,8 @@ from marine_formation_env.rules import CROSS_TRACK, CURVATURE, DESIRED_SPEED, HE
 
 __all__ = ["HANDOVER_PREFIX", "HOLD", "HandoverPolicy", "in_band", "is_handover"]
 
-#: ``--policy handover:LEARNED``: the learned policy ``LEARNED`` handing over to the reference (``baselines.evaluate``).
+#: ``--policy handover:LEARNED``: the learned policy ``LEARNED`` handing over to the reference.
 HANDOVER_PREFIX = "handover:"
-
 
 #: How long [s] a vessel's own observation stays in the band, without a break, before it hands over.
 HOLD = 20.0
@@ -63,10 +62,10 @@ def is_handover(spec: str) -> bool:
 def in_band(layout: ObservationLayout, obs: np.ndarray, bands: dict[str, float] = SUCCESS_BANDS) -> np.ndarray:
     """Whether each observation ``(..., dim)`` is inside ``bands`` (module docstring): ``(...)`` booleans.
 
-    Reads the own part and the slots only: the cross-track error, the heading relative to the path, the largest
-    predicted coordination error over the linked slots (0 without a linked
-    slot), and the lane speed error ``(1 − κ·D_y)·(ℓ̇ − u_d)`` with
-    ``ℓ̇ = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``.
+    Reads the own part and the slots only: the cross-track error, the
+    heading relative to the path, the largest predicted coordination error
+    over the linked slots (0 without a linked slot), and the lane speed error
+    ``(1 − κ·D_y)·(ℓ̇ − u_d)`` with ``ℓ̇ = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``.
     """
     own, slots = layout.split(np.asarray(obs, dtype=float))
     e, psi, u, v = (own[..., k] for k in (CROSS_TRACK, HEADING, SURGE, SWAY))
@@ -84,7 +83,7 @@ def in_band(layout: ObservationLayout, obs: np.ndarray, bands: dict[str, float] 
 
 
 class HandoverPolicy(BatchPolicy):
-    """``learned`` until a vessel's own observation is in the band, the extrapolating reference from then on.
+    """``learned`` until a vessel's own observation has been in the band for ``HOLD``, then the reference.
 
     Args:
         learned: a batch policy (``act_batch``) at the scenario's action level:
