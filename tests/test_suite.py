@@ -146,3 +146,15 @@ def test_bad_arguments_are_refused_in_one_line(argv, message, capsys, tmp_path, 
     assert stop.value.code == 2
     assert message in capsys.readouterr().err
     assert not Path("x.json").exists()
+
+
+def test_the_benchmark_page_shows_the_tables_of_the_committed_results_file():
+    """docs/benchmark.md between its markers is what ``report`` makes of docs/benchmark_results.json."""
+    root = Path(__file__).resolve().parents[1]
+    results = json.loads((root / "docs" / "benchmark_results.json").read_text())
+    page = (root / "docs" / "benchmark.md").read_text()
+    start, end = suite.MARKERS
+    assert page.count(start) == 1 and page.count(end) == 1, "the page needs one pair of result markers"
+    block = page.split(start, 1)[1].split(end, 1)[0]
+    expected = suite.format_report(results, suite.aggregate(suite.scores(results)))
+    assert expected in block, "regenerate: python -m benchmarks.suite report --document docs/benchmark.md"
