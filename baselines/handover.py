@@ -3,8 +3,8 @@
 The learned rows return more than the paper's controller but end less
 precisely: their formations stop centimetres to decimetres apart, where the
 controller drives every error to zero (the paper's convergence result for
-the consensus law (20) with LOS path following, from any initial
-condition). ``HandoverPolicy`` composes the two: each vessel acts with the
+the consensus law (20) with LOS path following, from any initial condition,
+on ideal links). ``HandoverPolicy`` composes the two: each vessel acts with the
 learned policy until its **own observation** is inside the bands a
 successful episode ends in (``baselines.metrics.SUCCESS_BANDS``),
 
