@@ -40,10 +40,10 @@ from typing import Any
 import numpy as np
 
 from baselines.metrics import SUCCESS_BANDS
-from baselines.reference import ReferencePolicy, predicted_coordination_error
+from baselines.reference import ReferencePolicy, own_path_rate, predicted_coordination_error
 from baselines.rollout import BatchPolicy
 from marine_formation_env.observations import ObservationLayout
-from marine_formation_env.rules import CROSS_TRACK, CURVATURE, DESIRED_SPEED, HEADING, LANE_OFFSET, LINK, SURGE, SWAY
+from marine_formation_env.rules import CROSS_TRACK, CURVATURE, DESIRED_SPEED, HEADING, LANE_OFFSET, LINK
 
 __all__ = ["HANDOVER_PREFIX", "HOLD", "HandoverPolicy", "in_band", "is_handover"]
 
@@ -65,15 +65,14 @@ def in_band(layout: ObservationLayout, obs: np.ndarray, bands: dict[str, float] 
     Reads the own part and the slots only: the cross-track error, the
     heading relative to the path, the largest predicted coordination error
     over the linked slots (0 without a linked slot), and the lane speed error
-    ``(1 − κ·D_y)·(ℓ̇ − u_d)`` with ``ℓ̇ = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``.
+    ``(1 − κ·D_y)·(ℓ̇ − u_d)`` with the own along-path rate ℓ̇ (``own_path_rate``).
     """
     own, slots = layout.split(np.asarray(obs, dtype=float))
-    e, psi, u, v = (own[..., k] for k in (CROSS_TRACK, HEADING, SURGE, SWAY))
+    e, psi = own[..., CROSS_TRACK], own[..., HEADING]
     kappa, d_y, u_d = own[..., CURVATURE], own[..., LANE_OFFSET], own[..., DESIRED_SPEED]
-    ell_dot = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (d_y + e))
     linked = slots[..., LINK] > 0.5
     coordination = np.max(np.where(linked, np.abs(predicted_coordination_error(own, slots)), 0.0), axis=-1)
-    speed = (1.0 - kappa * d_y) * (ell_dot - u_d)
+    speed = (1.0 - kappa * d_y) * (own_path_rate(own) - u_d)
     return np.asarray(
         (np.abs(e) <= bands["cross_track"])
         & (np.abs(psi) <= np.radians(bands["heading_deg"]))
@@ -101,9 +100,7 @@ class HandoverPolicy(BatchPolicy):
             raise TypeError(f"HandoverPolicy needs a batch policy (act_batch) to hand over from, got {learned!r}")
         self.learned = learned
         self.reference = ReferencePolicy(env, extrapolate=True)
-        config = self.reference.config
-        self.layout = ObservationLayout(config.n_vessels, config.observation_slots)
-        self.hold_steps = int(np.ceil(HOLD / config.dt - 1e-9))
+        self.hold_steps = int(np.ceil(HOLD / self.reference.config.dt - 1e-9))
         self.switched: np.ndarray | None = None
         self.inside: np.ndarray | None = None  # control periods in the band without a break, per row
 
@@ -117,7 +114,7 @@ class HandoverPolicy(BatchPolicy):
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """Normalized actions ``(..., A)`` for observations ``(..., obs_dim)``."""
         obs = np.asarray(obs)
-        now = in_band(self.layout, obs)
+        now = in_band(self.reference.layout, obs)
         if self.switched is None or self.inside is None or self.switched.shape != now.shape:
             self.switched, self.inside = np.zeros(now.shape, dtype=bool), np.zeros(now.shape, dtype=int)
         self.inside = np.where(now, self.inside + 1, 0)

@@ -76,7 +76,7 @@ from marine_formation_env.rules import (
 )
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ReferencePolicy", "predicted_coordination_error", "rule_broadcasting"]
+__all__ = ["ReferencePolicy", "own_path_rate", "predicted_coordination_error", "rule_broadcasting"]
 
 
 def rule_broadcasting(config: ScenarioConfig) -> ScenarioConfig:
@@ -85,16 +85,22 @@ def rule_broadcasting(config: ScenarioConfig) -> ScenarioConfig:
     return dataclasses.replace(config, transmit=False) if config.transmit else config
 
 
+def own_path_rate(own: np.ndarray) -> np.ndarray:
+    """Each vessel's own along-path rate from the own parts ``(..., 10)`` of its observation: the speed of its
+    projection, ``ℓ̇ = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))`` (``ẋ`` on the straight path). Returns ``(...)``."""
+    e, psi, u, v, kappa, d_y = (own[..., k] for k in (CROSS_TRACK, HEADING, SURGE, SWAY, CURVATURE, LANE_OFFSET))
+    return np.asarray((u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (d_y + e)))
+
+
 def predicted_coordination_error(own: np.ndarray, slots: np.ndarray) -> np.ndarray:
     """Each slot's Δθ with the neighbour's position predicted to now from its message (``extrapolate=True``).
 
     ``own``: the own parts ``(..., 10)``; ``slots``: ``(..., K, 4)``. A slot holds vessel i's position as it
     was ``age`` seconds ago, so ``Δθ − ẋ_i·age`` with ``ẋ_i = ẋ_j − Δẋ`` and vessel j's own along-path rate
-    ``ẋ_j = (u cos ψ − v sin ψ)/(1 − κ·(D_y + e))``; exact while i's speed holds, unchanged at age 0 (an
-    ideal link). Returns ``(..., K)``.
+    ``ẋ_j`` (``own_path_rate``); exact while i's speed holds, unchanged at age 0 (an ideal link). Returns
+    ``(..., K)``.
     """
-    e, psi, u, v, kappa, d_y = (own[..., k] for k in (CROSS_TRACK, HEADING, SURGE, SWAY, CURVATURE, LANE_OFFSET))
-    x_dot_own = (u * np.cos(psi) - v * np.sin(psi)) / (1.0 - kappa * (d_y + e))
+    x_dot_own = own_path_rate(own)
     return np.asarray(slots[..., COORDINATION] - (x_dot_own[..., None] - slots[..., VELOCITY]) * slots[..., AGE])
 
 
@@ -188,7 +194,7 @@ class ReferencePolicy(BatchPolicy):
         u_c, u_c_dot = lane_speed(cfg.params, w, w_dot, kappa, d_y)
         out = {"u_c": u_c, "u_c_dot": u_c_dot}
         if cfg.action_level == "guidance" and not cfg.straight:  # relative to the path, crab included
-            ell_dot = (u * np.cos(psi) - v * np.sin(psi)) / metric
+            ell_dot = own_path_rate(own)
             crab = turn_crab(cfg.params, kappa, u, 0.0, ell_dot, 0.0)[0]
             out["psi_d"] = los_angle(self._steering_error(e, advance), cfg.gains.delta) - crab
         elif cfg.action_level == "guidance":
