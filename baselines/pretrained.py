@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from baselines.reference import predicted_coordination_error
+from baselines.residual import ResidualPolicy
 from baselines.rollout import BatchPolicy
 from marine_formation_env import ENV_ID
 from marine_formation_env.atomic import atomic_write_bytes
@@ -68,7 +69,7 @@ from marine_formation_env.rules import (
     slot_count,
     traffic_entries,
 )
-from marine_formation_env.scenarios import ScenarioConfig
+from marine_formation_env.scenarios import ScenarioConfig, make_config
 
 __all__ = [
     "FORMAT",
@@ -107,6 +108,8 @@ class PretrainedInfo:
         description: one line for ``--list-pretrained``.
         training: how it was trained (pipeline, seed, minutes, vessel-steps, commit, config).
         evaluation: what it measured at export (return, success, reference's return, seeds).
+        residual: the network is the learned part of a residual policy (``baselines.residual``): the policy
+            acts with the extrapolating reference's action plus the network's output.
     """
 
     name: str
@@ -121,6 +124,7 @@ class PretrainedInfo:
     description: str = ""
     training: dict[str, Any] = field(default_factory=dict)
     evaluation: dict[str, Any] = field(default_factory=dict)
+    residual: bool = False
 
     def to_json(self) -> str:
         return json.dumps({"format": FORMAT, **self.__dict__}, sort_keys=True)
@@ -394,8 +398,11 @@ def list_pretrained(folder: Path | None = None) -> list[PretrainedInfo]:
     return [_read(path)[1] for path in sorted((folder or PRETRAINED_DIR).glob("*.npz"))]
 
 
-def load_pretrained(name: str, folder: Path | None = None) -> tuple[MLPPolicy, PretrainedInfo]:
+def load_pretrained(name: str, folder: Path | None = None) -> tuple[BatchPolicy, PretrainedInfo]:
     """The policy called ``name`` and its header.
+
+    The policy is the file's network (``MLPPolicy``), or, for a file whose header says ``residual``, the
+    ``ResidualPolicy`` of that network on the policy's training configuration.
 
     Raises:
         ValueError: no such policy (the message lists the shipped ones) or an unreadable file.
@@ -404,7 +411,12 @@ def load_pretrained(name: str, folder: Path | None = None) -> tuple[MLPPolicy, P
     if not path.is_file():
         known = [info.name for info in list_pretrained(folder)]
         raise ValueError(f"no pretrained policy {name!r}; shipped: {known}")
-    return _read(path)
+    network, info = _read(path)
+    if not info.residual:
+        return network, info
+    policy = ResidualPolicy(network, make_config(info.scenario, **info.env_kwargs))
+    policy.info = info
+    return policy, info
 
 
 def check_compatible(info: PretrainedInfo, config: ScenarioConfig, observation_dim: int) -> None:

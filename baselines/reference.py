@@ -70,6 +70,8 @@ from marine_formation_env.rules import (
     CURVATURE,
     HEADING,
     LANE_OFFSET,
+    OWN_SIZE,
+    SLOT_SIZE,
     SURGE,
     SWAY,
     VELOCITY,
@@ -114,19 +116,27 @@ class ReferencePolicy(BatchPolicy):
             message's velocity and age (module docstring).
         integral_los: σ > 0 [m/s] to steer with integral LOS (module
             docstring; ``guidance`` and ``force`` levels); None: the paper's LOS.
+        any_team: read observations of any length, as a slot network does: the
+            slot count is taken from each observation (own part, then slots, no
+            ``transmit`` entries), not from ``env``'s team. The controller itself
+            reads nothing else of the team: its gains, model and speed band are
+            ``env``'s.
 
     Use ``act`` with a PettingZoo observation dict, or ``act_batch``
     with an array of observations ``(..., obs_dim)``.
     """
 
-    def __init__(self, env: Any, extrapolate: bool = False, integral_los: float | None = None) -> None:
+    def __init__(
+        self, env: Any, extrapolate: bool = False, integral_los: float | None = None, any_team: bool = False
+    ) -> None:
         config = env if isinstance(env, ScenarioConfig) else getattr(getattr(env, "unwrapped", env), "config", None)
         if not isinstance(config, ScenarioConfig):
             raise TypeError(
                 f"ReferencePolicy needs a marine_formation_env env or ScenarioConfig, got {type(env).__name__}"
             )
-        if not isinstance(extrapolate, bool):
-            raise TypeError(f"extrapolate must be True or False, got {extrapolate!r}")
+        for name, flag in (("extrapolate", extrapolate), ("any_team", any_team)):
+            if not isinstance(flag, bool):
+                raise TypeError(f"{name} must be True or False, got {flag!r}")
         if integral_los is not None:
             if isinstance(integral_los, bool) or not isinstance(integral_los, (int, float)) or not integral_los > 0:
                 raise ValueError(f"integral_los must be a gain σ > 0 [m/s] or None, got {integral_los!r}")
@@ -144,6 +154,7 @@ class ReferencePolicy(BatchPolicy):
         self.config = config
         self.layout = ObservationLayout(config.n_vessels, config.observation_slots)
         self.extrapolate = extrapolate
+        self.any_team = any_team
         self.integral_los = None if integral_los is None else float(integral_los)
         self._e_int: np.ndarray | None = None
 
@@ -166,6 +177,21 @@ class ReferencePolicy(BatchPolicy):
             self._e_int = self._e_int + self.config.dt * rate
         return z
 
+    def _layout_of(self, obs: np.ndarray) -> ObservationLayout:
+        """The layout ``obs`` is read with: the team's, or (``any_team``) the one its length implies."""
+        dim = obs.shape[-1] if obs.ndim else 0
+        if not self.any_team:
+            if dim != self.layout.dim:
+                raise ValueError(f"observations must end in dimension {self.layout.dim}, got shape {obs.shape}")
+            return self.layout
+        slots, rest = divmod(dim - OWN_SIZE, SLOT_SIZE)
+        if dim <= OWN_SIZE or rest:
+            raise ValueError(
+                f"observations of any team are {OWN_SIZE} own entries and {SLOT_SIZE} per slot "
+                f"({OWN_SIZE + SLOT_SIZE}, {OWN_SIZE + 2 * SLOT_SIZE}, ...), got shape {obs.shape}"
+            )
+        return ObservationLayout(slots + 1)
+
     def commands(self, obs: np.ndarray, advance: bool = False) -> dict[str, np.ndarray]:
         """Physical commands for observations ``(..., obs_dim)``.
 
@@ -178,9 +204,7 @@ class ReferencePolicy(BatchPolicy):
         """
         cfg = self.config
         obs = np.asarray(obs, dtype=float)
-        if obs.shape[-1:] != (self.layout.dim,):
-            raise ValueError(f"observations must end in dimension {self.layout.dim}, got shape {obs.shape}")
-        own, slots = self.layout.split(obs)
+        own, slots = self._layout_of(obs).split(obs)
         # psi is the heading relative to the path (the heading itself on the straight path)
         e, psi, u, v, r, u_d, u_d_dot, kappa, _, d_y = (own[..., k] for k in range(10))
         linked, d_theta, d_xdot = (slots[..., k] for k in range(3))

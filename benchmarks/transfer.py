@@ -11,7 +11,9 @@ training setting of each policy of that level (``info.scenario``,
 the one a generated team gets), so that its seeds are different starts.
 
 Each policy is run on every setting of its level that ``check_compatible``
-accepts; a setting it refuses is listed with the reason. Per setting, once for
+accepts; a setting it refuses is listed with the reason. A speed-level policy
+trained with the env's integral LOS runs with it everywhere
+(``policy_overrides``): the path follower is part of what it learned on. Per setting, once for
 all policies: the reference's variants that apply there (``reference``;
 ``reference:extrapolate`` over a lossy channel; integral LOS under a current:
 ``ReferencePolicy(integral_los=1)`` at guidance and force,
@@ -69,6 +71,7 @@ __all__ = [
     "level_settings",
     "main",
     "normalized_score",
+    "policy_overrides",
     "reference_variants",
     "return_ratio",
     "transfer",
@@ -209,6 +212,13 @@ def reference_variants(config: ScenarioConfig) -> dict[str, tuple[dict[str, Any]
     return out
 
 
+def policy_overrides(info: PretrainedInfo) -> dict[str, Any]:
+    """The env settings a policy takes with it to every setting: a speed-level policy trained with the env's
+    integral LOS (``los_integral_gain`` > 0) keeps that path follower, which is part of what it learned on."""
+    gain = info.env_kwargs.get("los_integral_gain", 0.0)
+    return {"los_integral_gain": gain} if info.action_level == "speed" and gain else {}
+
+
 def best_reference(summaries: dict[str, dict[str, Any]]) -> str:
     """The variant with the highest mean return (the first listed on a tie)."""
     return max(summaries, key=lambda label: summaries[label]["return"])
@@ -326,7 +336,10 @@ def transfer(
             if setting is not s:
                 continue
             policy, _ = load_pretrained(info.name)
-            result = _run(policy, config, seeds)
+            own = policy_overrides(info)
+            result = _run(policy, s.env(own).config if own else config, seeds)
+            if own:
+                result["env_overrides"] = own
             result["ratio"] = return_ratio(ref_return, result["return"])
             result["score"] = normalized_score(result["return"], ref_return, rand_return)
             result["holds_target"] = holds_target(result["ratio"], result["success"], references[best]["success"])

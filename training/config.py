@@ -34,6 +34,10 @@ the learner trains on and nothing else, as in ``training.torchrl_ppo``:
 ``train_reward: {sigma_cross_track: 5.0, sigma_coordination: 5.0}`` trains
 every team on 5 m scales, while evaluations, checkpoints' headers and exports
 keep ``env_kwargs``'s reward, the benchmark's.
+``residual: true`` trains the learned part of a residual policy
+(``baselines.residual``): the env receives the extrapolating reference's
+action plus the network's, so a network that outputs zero is the paper's
+controller; evaluations, checkpoints and exports act the same way.
 ``algo: ppo`` is ``training.smoothness.SmoothPPO``, SB3's PPO with one more
 hyperparameter, ``temporal_smoothness`` (λ ≥ 0, default 0: PPO itself), a
 regularizer on the change of the policy's mean action between consecutive
@@ -111,6 +115,7 @@ SPECIAL_KEYS = {
     "train_reward": {},
     "initial_state_curriculum": None,
     "transmit_bias": None,
+    "residual": False,
 }
 
 #: Keys a resumed run may change (``python -m training.train --resume --set ...``); nothing else.
@@ -466,6 +471,13 @@ def validate(config: dict[str, Any]) -> dict[str, Any]:
     except ConfigError as err:
         raise TrainConfigError(f"env_kwargs: {err}") from None
     resolved["transmit_bias"] = _transmit_bias(resolved["transmit_bias"], scenario.transmit, resolved["algo"])
+    if not isinstance(resolved["residual"], bool):
+        raise TrainConfigError(f"residual must be true or false, got {resolved['residual']!r}")
+    if resolved["residual"] and scenario.transmit:
+        raise TrainConfigError(
+            "residual: true adds the reference's action, and the reference sends no transmit entry "
+            "(the scenario has transmit = true)"
+        )
     if not isinstance(resolved["policy_kwargs"], dict):
         raise TrainConfigError(f"policy_kwargs must be a mapping, got {resolved['policy_kwargs']!r}")
     act = resolved["policy_kwargs"].get("activation_fn")

@@ -23,6 +23,7 @@ import numpy as np
 from torch import nn
 
 from baselines.pretrained import MLPPolicy, PretrainedInfo, save_pretrained
+from baselines.residual import ResidualPolicy
 from baselines.runs import run_folder_of, trainer_of
 from baselines.seeds import evaluation_seeds
 from marine_formation_env.cli import ArgumentParser
@@ -37,6 +38,8 @@ __all__ = ["export_run", "main"]
 def _sb3_network(run: Path) -> tuple[MLPPolicy, dict[str, Any]]:
     """The deterministic network of an SB3 ``training.train`` run (MlpPolicy, tanh) as an ``MLPPolicy``."""
     policy, config = load_learned_policy(run)
+    if isinstance(policy, ResidualPolicy):  # the learned part; the header says residual
+        policy = policy.correction
     model = policy.model
     net = model.policy
     if getattr(getattr(net, "mlp_extractor", None), "policy_net", None) is None or not hasattr(net, "action_net"):
@@ -166,6 +169,7 @@ def export_run(
         description=description,
         training={"pipeline": pipeline, "seed": config.get("seed"), **(training or {})},
         evaluation=measured,
+        residual=bool(config.get("residual", False)),
     )
     return save_pretrained(policy, info, folder)
 

@@ -5,7 +5,8 @@ was trained with) as a policy over PettingZoo observation dicts: every vessel
 acts from its own masked observation with the shared network.
 ``load_sb3_run`` loads one from a run folder written by
 ``python -m training.train`` (``model.zip``, ``vecnormalize.pkl``,
-``config.yaml``); ``load_learned_policy`` loads a run folder of any trainer,
+``config.yaml``; a run with ``residual: true`` as the ``ResidualPolicy`` of
+its network); ``load_learned_policy`` loads a run folder of any trainer,
 by the ``trainer`` field of its ``config.yaml``.
 """
 
@@ -20,11 +21,13 @@ import numpy as np
 
 from baselines.engine import episode_reports
 from baselines.reference import ReferencePolicy, rule_broadcasting
+from baselines.residual import ResidualPolicy
 from baselines.rollout import BatchPolicy
 from baselines.runs import RunFolderError, load_run, read_config, run_folder_of
 from baselines.seeds import evaluation_seeds
 from marine_formation_env.atomic import atomic_write_text
 from marine_formation_env.env import parallel_env
+from marine_formation_env.scenarios import make_config
 from training import run_folder
 from training.config import algo_class
 
@@ -139,7 +142,7 @@ def load_sb3_run(run: Path, deterministic: bool = True) -> tuple[BatchPolicy, di
 
 def _load_sb3_model(
     model_path: Path, config: dict[str, Any], deterministic: bool
-) -> tuple[ModelPolicy, dict[str, Any]]:
+) -> tuple[ModelPolicy | ResidualPolicy, dict[str, Any]]:
     if not model_path.is_file():
         raise FileNotFoundError(f"no model at {str(model_path)!r}")
     try:
@@ -157,7 +160,10 @@ def _load_sb3_model(
             normalizer.training = False
         except UNREADABLE as err:
             raise UnreadableRunError(f"cannot load the normalization {str(stats)!r}: {_reason(err)}") from None
-    return ModelPolicy(model, normalizer, deterministic), config
+    network = ModelPolicy(model, normalizer, deterministic)
+    if not config.get("residual", False):
+        return network, config
+    return ResidualPolicy(network, make_config(config["scenario"], **config["env_kwargs"])), config
 
 
 #: What reading a truncated, empty or foreign model or pickle file raises.

@@ -65,6 +65,7 @@ from pathlib import Path
 from typing import Any
 
 from marine_formation_env.cli import ArgumentParser, int_at_least, parse_overrides
+from marine_formation_env.scenarios import make_config
 from training import run_folder
 from training.config import (
     RESUMABLE_KEYS,
@@ -112,7 +113,7 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     """The SB3 training env: shared-policy adapter, episode monitor, optional VecNormalize."""
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from training.vec_env import SharedPolicyVecEnv, TeamsVecEnv
+    from training.vec_env import ResidualVecEnv, SharedPolicyVecEnv, TeamsVecEnv
 
     teams = [  # each team's preset and overrides, with train_reward's shaping
         SharedPolicyVecEnv(resolved["n_envs"], scenario, **training_env_kwargs(resolved, kw))
@@ -120,6 +121,8 @@ def build_env(resolved: dict[str, Any], seed: int | None) -> Any:
     ]
     venv: Any = teams[0] if len(teams) == 1 else TeamsVecEnv(teams)
     venv.seed(seed)
+    if resolved["residual"]:  # on raw observations, inside the normalization
+        venv = ResidualVecEnv(venv, make_config(resolved["scenario"], **resolved["env_kwargs"]))
     venv = VecMonitor(venv)
     norm = resolved["normalize"]
     if norm:

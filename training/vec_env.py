@@ -15,6 +15,10 @@ already those of the next episode. ``seed(s)`` makes formation ``b`` start from
 ``TeamsVecEnv`` puts several of them side by side (teams of different
 sizes or graphs whose observations share one length, ``observation_slots``):
 one policy trains on all of them at once.
+
+``ResidualVecEnv`` makes the policy's action the learned part of a residual
+policy (``baselines.residual``): each entry's env receives the extrapolating
+reference's action, from the entry's own observation, plus the policy's.
 """
 
 from __future__ import annotations
@@ -29,12 +33,15 @@ from stable_baselines3.common.vec_env.base_vec_env import (
     VecEnv,
     VecEnvIndices,
     VecEnvStepReturn,
+    VecEnvWrapper,
 )
 
+from baselines.residual import residual_actions, residual_base
 from marine_formation_env.frontend import REWARD_INFO_KEYS
+from marine_formation_env.scenarios import ScenarioConfig
 from marine_formation_env.vector import MarineFormationVectorEnv
 
-__all__ = ["SharedPolicyVecEnv", "TeamsVecEnv"]
+__all__ = ["ResidualVecEnv", "SharedPolicyVecEnv", "TeamsVecEnv"]
 
 
 class SharedPolicyVecEnv(VecEnv):
@@ -252,3 +259,32 @@ class TeamsVecEnv(VecEnv):
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [None] * self.num_envs
+
+
+class ResidualVecEnv(VecEnvWrapper):
+    """The env of a residual policy's learned part: the reference's action is added to the policy's.
+
+    Args:
+        venv: a ``SharedPolicyVecEnv`` or ``TeamsVecEnv`` (raw observations: wrap it before ``VecNormalize``).
+        config: the policy's training configuration (``baselines.residual.residual_base``).
+    """
+
+    def __init__(self, venv: VecEnv, config: ScenarioConfig) -> None:
+        super().__init__(venv)
+        self.base = residual_base(config)
+        self._obs: np.ndarray | None = None
+
+    def reset(self) -> np.ndarray:
+        self._obs = self.venv.reset()
+        return self._obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        if self._obs is None:
+            raise RuntimeError("step_async() called before reset()")
+        base = self.base.act_batch(self._obs)
+        self.venv.step_async(residual_actions(base, np.asarray(actions).reshape(base.shape)))
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, reward, dones, infos = self.venv.step_wait()
+        self._obs = obs  # after an autoreset, the next episode's first observation: what the next action reads
+        return obs, reward, dones, infos
