@@ -336,10 +336,10 @@ def transfer(
             if setting is not s:
                 continue
             policy, _ = load_pretrained(info.name)
-            own = policy_overrides(info)
-            result = _run(policy, s.env(own).config if own else config, seeds)
-            if own:
-                result["env_overrides"] = own
+            carried = policy_overrides(info)
+            result = _run(policy, s.env(carried).config if carried else config, seeds)
+            if carried:
+                result["env_overrides"] = carried
             result["ratio"] = return_ratio(ref_return, result["return"])
             result["score"] = normalized_score(result["return"], ref_return, rand_return)
             result["holds_target"] = holds_target(result["ratio"], result["success"], references[best]["success"])

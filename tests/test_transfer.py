@@ -181,3 +181,16 @@ def test_bad_arguments_are_refused_in_one_line(argv, message, capsys, tmp_path):
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
     assert not (tmp_path / "t.json").exists()
+
+
+def test_a_speed_policy_trained_on_integral_los_keeps_it_everywhere():
+    from baselines.pretrained import PretrainedInfo
+    from benchmarks.transfer import policy_overrides
+
+    def info(level, **env_kwargs):
+        return PretrainedInfo("p", "paper", {"action_level": level, **env_kwargs}, level, None, None, 1)
+
+    assert policy_overrides(info("speed", los_integral_gain=1.0)) == {"los_integral_gain": 1.0}
+    assert policy_overrides(info("speed")) == {}
+    assert policy_overrides(info("speed", los_integral_gain=0.0)) == {}
+    assert policy_overrides(info("guidance")) == {}  # a guidance policy steers itself

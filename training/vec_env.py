@@ -275,8 +275,9 @@ class ResidualVecEnv(VecEnvWrapper):
         self._obs: np.ndarray | None = None
 
     def reset(self) -> np.ndarray:
-        self._obs = self.venv.reset()
-        return self._obs
+        obs = np.asarray(self.venv.reset())
+        self._obs = obs
+        return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         if self._obs is None:
@@ -286,5 +287,5 @@ class ResidualVecEnv(VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, reward, dones, infos = self.venv.step_wait()
-        self._obs = obs  # after an autoreset, the next episode's first observation: what the next action reads
+        self._obs = np.asarray(obs)  # after an autoreset, the next episode's first observation: what the next action reads
         return obs, reward, dones, infos
