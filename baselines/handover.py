@@ -40,10 +40,10 @@ from typing import Any
 import numpy as np
 
 from baselines.metrics import SUCCESS_BANDS
-from baselines.reference import ReferencePolicy, own_path_rate, predicted_coordination_error
+from baselines.reference import ReferencePolicy, coordination_gap, own_path_rate
 from baselines.rollout import BatchPolicy
 from marine_formation_env.observations import ObservationLayout
-from marine_formation_env.rules import CROSS_TRACK, CURVATURE, DESIRED_SPEED, HEADING, LANE_OFFSET, LINK
+from marine_formation_env.rules import CROSS_TRACK, CURVATURE, DESIRED_SPEED, HEADING, LANE_OFFSET
 
 __all__ = ["HANDOVER_PREFIX", "HOLD", "HandoverPolicy", "in_band", "is_handover"]
 
@@ -64,19 +64,17 @@ def in_band(layout: ObservationLayout, obs: np.ndarray, bands: dict[str, float] 
 
     Reads the own part and the slots only: the cross-track error, the
     heading relative to the path, the largest predicted coordination error
-    over the linked slots (0 without a linked slot), and the lane speed error
+    over the linked slots (``coordination_gap``), and the lane speed error
     ``(1 − κ·D_y)·(ℓ̇ − u_d)`` with the own along-path rate ℓ̇ (``own_path_rate``).
     """
     own, slots = layout.split(np.asarray(obs, dtype=float))
     e, psi = own[..., CROSS_TRACK], own[..., HEADING]
     kappa, d_y, u_d = own[..., CURVATURE], own[..., LANE_OFFSET], own[..., DESIRED_SPEED]
-    linked = slots[..., LINK] > 0.5
-    coordination = np.max(np.where(linked, np.abs(predicted_coordination_error(own, slots)), 0.0), axis=-1)
     speed = (1.0 - kappa * d_y) * (own_path_rate(own) - u_d)
     return np.asarray(
         (np.abs(e) <= bands["cross_track"])
         & (np.abs(psi) <= np.radians(bands["heading_deg"]))
-        & (coordination <= bands["spread"])
+        & (coordination_gap(own, slots) <= bands["spread"])
         & (np.abs(speed) <= bands["speed"])
     )
 

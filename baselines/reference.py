@@ -70,6 +70,7 @@ from marine_formation_env.rules import (
     CURVATURE,
     HEADING,
     LANE_OFFSET,
+    LINK,
     OWN_SIZE,
     SLOT_SIZE,
     SURGE,
@@ -78,7 +79,13 @@ from marine_formation_env.rules import (
 )
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ReferencePolicy", "own_path_rate", "predicted_coordination_error", "rule_broadcasting"]
+__all__ = [
+    "ReferencePolicy",
+    "coordination_gap",
+    "own_path_rate",
+    "predicted_coordination_error",
+    "rule_broadcasting",
+]
 
 
 def rule_broadcasting(config: ScenarioConfig) -> ScenarioConfig:
@@ -104,6 +111,14 @@ def predicted_coordination_error(own: np.ndarray, slots: np.ndarray) -> np.ndarr
     """
     x_dot_own = own_path_rate(own)
     return np.asarray(slots[..., COORDINATION] - (x_dot_own[..., None] - slots[..., VELOCITY]) * slots[..., AGE])
+
+
+def coordination_gap(own: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """The largest coordination error ``|θ_j − θ_i|`` over the linked slots, each predicted to now from its
+    message's age (``predicted_coordination_error``); 0 without a linked slot. ``own`` ``(..., 10)``, ``slots``
+    ``(..., K, 4)``; returns ``(...)``."""
+    linked = slots[..., LINK] > 0.5
+    return np.asarray(np.max(np.where(linked, np.abs(predicted_coordination_error(own, slots)), 0.0), axis=-1))
 
 
 class ReferencePolicy(BatchPolicy):
@@ -177,8 +192,12 @@ class ReferencePolicy(BatchPolicy):
             self._e_int = self._e_int + self.config.dt * rate
         return z
 
-    def _layout_of(self, obs: np.ndarray) -> ObservationLayout:
-        """The layout ``obs`` is read with: the team's, or (``any_team``) the one its length implies."""
+    def layout_of(self, obs: np.ndarray) -> ObservationLayout:
+        """The layout ``obs`` ``(..., dim)`` is read with: the team's, or (``any_team``) the one its length implies.
+
+        Raises:
+            ValueError: a length that is not the team's (or, with ``any_team``, no team's).
+        """
         dim = obs.shape[-1] if obs.ndim else 0
         if not self.any_team:
             if dim != self.layout.dim:
@@ -204,7 +223,7 @@ class ReferencePolicy(BatchPolicy):
         """
         cfg = self.config
         obs = np.asarray(obs, dtype=float)
-        own, slots = self._layout_of(obs).split(obs)
+        own, slots = self.layout_of(obs).split(obs)
         # psi is the heading relative to the path (the heading itself on the straight path)
         e, psi, u, v, r, u_d, u_d_dot, kappa, _, d_y = (own[..., k] for k in range(10))
         linked, d_theta, d_xdot = (slots[..., k] for k in range(3))

@@ -1,19 +1,32 @@
-"""Residual policies: the paper's controller plus a learned correction.
+"""Residual policies: the paper's controller plus a learned correction that vanishes in formation.
 
-A residual policy acts with ``clip(a_ref(o) + a_net(o), −1, 1)``: ``a_ref`` is
-the extrapolating reference (``ReferencePolicy(extrapolate=True)``, which over
-ideal links is the paper's controller) and ``a_net`` a network's output, both
-from the vessel's own masked observation and in the env's normalized action
-units. A network that outputs zero is the reference; training it (residual
-policy learning: Silver et al., 2018; Johannink et al., 2019) learns only
-where the controller leaves return on the table. The controller part reads
-observations of any team (``any_team``) and takes its gains, model and speed
-band from one configuration, the policy's training one, so a residual policy
-is one fixed function of the observation wherever it runs.
+A residual policy acts with
 
-``ResidualPolicy`` is the policy; ``residual_base`` the controller part, which
-``training.vec_env.ResidualVecEnv`` adds during training with
-``residual_actions``, the one rule both use.
+    a = clip(a_ref(o) + γ(o)·a_net(o), −1, 1),   γ(o) = 1 − exp(−(e/w_e)² − (Δθ_max/w_θ)²),
+
+all from the vessel's own masked observation ``o`` and in the env's normalized
+action units:
+
+* ``a_ref`` is the extrapolating reference (``ReferencePolicy(extrapolate=True)``,
+  over ideal links the paper's controller);
+* ``a_net`` is a network's output, the learned part (residual policy learning:
+  Silver et al., 2018; Johannink et al., 2019);
+* ``γ`` is the gate: ``e`` the vessel's cross-track error and ``Δθ_max`` the
+  largest coordination error over its linked slots, predicted to now from the
+  message's age (``coordination_gap``); the widths are the success band's,
+  ``w_e = w_θ = 1 m`` (``baselines.metrics.SUCCESS_BANDS``).
+
+Far from formation ``γ ≈ 1`` and the network corrects the controller freely;
+in formation (``e = 0``, every linked ``Δθ = 0``) ``γ = 0`` and the policy is
+the controller, and since ``γ`` is quadratic in the errors the correction
+leaves the controller's linearization there unchanged, so the formation the
+paper's controller converges to is kept, with its precision. The controller
+part reads observations of any team (``any_team``) and takes its gains,
+model and speed band from one configuration, the policy's training one, so a
+residual policy is one fixed function of the observation wherever it runs.
+
+``ResidualPolicy`` is the policy; ``residual_actions`` the rule, which
+``training.vec_env.ResidualVecEnv`` applies during training too.
 """
 
 from __future__ import annotations
@@ -22,11 +35,13 @@ from typing import Any
 
 import numpy as np
 
-from baselines.reference import ReferencePolicy
+from baselines.metrics import SUCCESS_BANDS
+from baselines.reference import ReferencePolicy, coordination_gap
 from baselines.rollout import BatchPolicy
+from marine_formation_env.rules import CROSS_TRACK
 from marine_formation_env.scenarios import ScenarioConfig
 
-__all__ = ["ResidualPolicy", "residual_actions", "residual_base"]
+__all__ = ["ResidualPolicy", "correction_gate", "residual_actions", "residual_base"]
 
 
 def residual_base(config: ScenarioConfig) -> ReferencePolicy:
@@ -34,13 +49,26 @@ def residual_base(config: ScenarioConfig) -> ReferencePolicy:
     return ReferencePolicy(config, extrapolate=True, any_team=True)
 
 
-def residual_actions(base: np.ndarray, correction: np.ndarray) -> np.ndarray:
-    """The action a residual policy sends: ``clip(base + correction, −1, 1)`` (float32, the env's units)."""
-    return np.clip(np.asarray(base) + np.asarray(correction), -1.0, 1.0).astype(np.float32)
+def correction_gate(own: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """``γ = 1 − exp(−(e/w_e)² − (Δθ_max/w_θ)²)`` of the own parts ``(..., 10)`` and slots ``(..., K, 4)``
+    (module docstring); returns ``(...)`` in [0, 1)."""
+    e = own[..., CROSS_TRACK] / SUCCESS_BANDS["cross_track"]
+    gap = coordination_gap(own, slots) / SUCCESS_BANDS["spread"]
+    return np.asarray(-np.expm1(-(e * e) - gap * gap))
+
+
+def residual_actions(base: ReferencePolicy, obs: np.ndarray, correction: np.ndarray) -> np.ndarray:
+    """``clip(a_ref(obs) + γ(obs)·correction, −1, 1)`` for observations ``(..., dim)`` and the learned part's
+    output ``(..., A)`` (float32, the env's units)."""
+    obs = np.asarray(obs, dtype=float)
+    own, slots = base.layout_of(obs).split(obs)
+    gate = correction_gate(own, slots)[..., None]
+    summed = base.act_batch(obs) + gate * np.asarray(correction).reshape(*obs.shape[:-1], -1)
+    return np.clip(summed, -1.0, 1.0).astype(np.float32)
 
 
 class ResidualPolicy(BatchPolicy):
-    """The extrapolating reference plus ``correction``'s output (module docstring).
+    """The extrapolating reference plus ``correction``'s output, gated (module docstring).
 
     Args:
         correction: the learned part, a ``BatchPolicy`` (a ``MLPPolicy`` or a ``ModelPolicy``).
@@ -75,5 +103,5 @@ class ResidualPolicy(BatchPolicy):
         self.base.reset()
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """``clip(a_ref(obs) + a_net(obs), −1, 1)`` for observations ``(..., dim)``."""
-        return residual_actions(self.base.act_batch(obs), self.correction.act_batch(obs))
+        """``clip(a_ref(obs) + γ(obs)·a_net(obs), −1, 1)`` for observations ``(..., dim)``."""
+        return residual_actions(self.base, obs, self.correction.act_batch(obs))

@@ -1,12 +1,15 @@
 """Residual policies (``baselines.residual``) and their training (``residual: true``).
 
-Truth: the paper's controller itself. A residual policy whose learned part
-outputs zero must act, step for step, as ``ReferencePolicy(extrapolate=True)``
-on the same observations; one whose learned part outputs ±2 must saturate the
-action; the controller part reading a padded observation (empty slots) must
-act as the controller reading the team's own observation, since an empty slot
-carries no link. The training env must apply the same sum, which an episode
-driven directly by the reference's actions checks.
+Truth: the paper's controller itself and the gate's closed form. A residual
+policy whose learned part outputs zero must act, step for step, as
+``ReferencePolicy(extrapolate=True)`` on the same observations; in formation
+(no cross-track error, no coordination error) it must be that controller
+whatever the learned part says; far from formation the correction passes
+(and ±2 saturates); the gate must be 1 − exp(−e² − Δθ²) of hand-set errors.
+The controller part reading a padded observation (empty slots) must act as the
+controller reading the team's own observation, since an empty slot carries no
+link. The training env must apply the same rule, which an episode driven
+directly by the reference's actions checks.
 """
 
 from __future__ import annotations
@@ -20,8 +23,9 @@ import pytest
 from baselines.engine import episode_reports
 from baselines.pretrained import MLPPolicy, PretrainedInfo, load_pretrained, save_pretrained
 from baselines.reference import ReferencePolicy
-from baselines.residual import ResidualPolicy, residual_actions
+from baselines.residual import ResidualPolicy, correction_gate, residual_actions
 from marine_formation_env import parallel_env
+from marine_formation_env.rules import COORDINATION, CROSS_TRACK, DESIRED_SPEED, LINK, SURGE
 from marine_formation_env.scenarios import make_config
 
 pytestmark = pytest.mark.backend_independent  # each comparison runs one backend on both sides
@@ -83,17 +87,45 @@ def test_a_residual_policy_at_zero_is_the_extrapolating_reference(scenario):
         assert mine["success"] == theirs["success"]
 
 
-def test_a_residual_policy_sums_and_saturates():
-    env = parallel_env("paper", action_level="speed")
-    obs = _stacked(env.reset(seed=0)[0])
-    base = ReferencePolicy(env, extrapolate=True).act_batch(obs)
-    assert np.all(np.abs(base) < 1.0)  # the start is inside the speed band: the sum below is not clipped
-    np.testing.assert_allclose(
-        ResidualPolicy(_Constant(0.25), env.config).act_batch(obs), np.minimum(base + 0.25, 1.0), atol=1e-7
+def _hand_set(e: float, gaps: list[float], linked: list[float]) -> np.ndarray:
+    """One observation of a vessel on the straight path at u = u_d = 5 m/s, heading along it, with cross-track
+    error ``e`` and fresh slots (age 0, same speed) at coordination errors ``gaps`` and link bits ``linked``."""
+    own = np.zeros(10)
+    own[CROSS_TRACK], own[SURGE], own[DESIRED_SPEED] = e, 5.0, 5.0
+    slots = np.zeros((len(gaps), 4))
+    slots[:, LINK], slots[:, COORDINATION] = linked, gaps
+    return np.concatenate([own, slots.ravel()])
+
+
+def test_the_gate_is_its_closed_form_and_ignores_unlinked_slots():
+    obs = np.stack(
+        [
+            _hand_set(0.0, [0.0, 0.0], [1, 1]),
+            _hand_set(1.0, [0.0, 0.0], [1, 1]),
+            _hand_set(0.5, [-2.0, 0.3], [1, 1]),
+            _hand_set(0.0, [50.0, 0.0], [0, 1]),  # the unlinked slot's error is not the vessel's to know
+        ]
     )
-    assert np.all(ResidualPolicy(_Constant(2.0), env.config).act_batch(obs) == 1.0)
-    assert np.all(ResidualPolicy(_Constant(-2.0), env.config).act_batch(obs) == -1.0)
-    assert residual_actions(np.array([0.5]), np.array([0.75])).dtype == np.float32
+    own, slots = obs[:, :10], obs[:, 10:].reshape(len(obs), -1, 4)
+    expected = [0.0, 1.0 - np.exp(-1.0), 1.0 - np.exp(-0.25 - 4.0), 0.0]
+    np.testing.assert_allclose(correction_gate(own, slots), expected, rtol=1e-14, atol=0)
+
+
+def test_in_formation_the_policy_is_the_controller_and_far_from_it_the_correction_passes():
+    config = make_config("paper", action_level="speed")
+    reference = ReferencePolicy(config, extrapolate=True)
+    in_formation = _hand_set(0.0, [0.0, 0.0], [1, 1])[None]
+    for value in (0.3, -2.0, 2.0):
+        np.testing.assert_array_equal(
+            ResidualPolicy(_Constant(value), config).act_batch(in_formation), reference.act_batch(in_formation)
+        )
+    far = _hand_set(30.0, [-20.0, 25.0], [1, 1])[None]  # γ = 1 − e^-1525: 1 in double precision
+    base = reference.act_batch(far)
+    assert np.all(np.abs(base) < 1.0)  # inside the speed band: the sum below is not clipped
+    np.testing.assert_allclose(ResidualPolicy(_Constant(0.25), config).act_batch(far), base + 0.25, atol=1e-7)
+    assert np.all(ResidualPolicy(_Constant(2.0), config).act_batch(far) == 1.0)
+    assert np.all(ResidualPolicy(_Constant(-2.0), config).act_batch(far) == -1.0)
+    assert residual_actions(reference, far, np.array([[0.1]])).dtype == np.float32
 
 
 def test_a_pretrained_file_with_a_residual_header_loads_as_the_composite(tmp_path):

@@ -36,8 +36,9 @@ every team on 5 m scales, while evaluations, checkpoints' headers and exports
 keep ``env_kwargs``'s reward, the benchmark's.
 ``residual: true`` trains the learned part of a residual policy
 (``baselines.residual``): the env receives the extrapolating reference's
-action plus the network's, so a network that outputs zero is the paper's
-controller; evaluations, checkpoints and exports act the same way.
+action plus the network's, gated to vanish in formation, so a network that
+outputs zero is the paper's controller; evaluations, checkpoints and exports
+act the same way.
 ``algo: ppo`` is ``training.smoothness.SmoothPPO``, SB3's PPO with one more
 hyperparameter, ``temporal_smoothness`` (λ ≥ 0, default 0: PPO itself), a
 regularizer on the change of the policy's mean action between consecutive

@@ -18,7 +18,8 @@ one policy trains on all of them at once.
 
 ``ResidualVecEnv`` makes the policy's action the learned part of a residual
 policy (``baselines.residual``): each entry's env receives the extrapolating
-reference's action, from the entry's own observation, plus the policy's.
+reference's action, from the entry's own observation, plus the policy's,
+gated by how far that observation is from formation (``residual_actions``).
 """
 
 from __future__ import annotations
@@ -262,7 +263,7 @@ class TeamsVecEnv(VecEnv):
 
 
 class ResidualVecEnv(VecEnvWrapper):
-    """The env of a residual policy's learned part: the reference's action is added to the policy's.
+    """The env of a residual policy's learned part: the policy's action is the correction ``residual_actions`` adds.
 
     Args:
         venv: a ``SharedPolicyVecEnv`` or ``TeamsVecEnv`` (raw observations: wrap it before ``VecNormalize``).
@@ -282,10 +283,11 @@ class ResidualVecEnv(VecEnvWrapper):
     def step_async(self, actions: np.ndarray) -> None:
         if self._obs is None:
             raise RuntimeError("step_async() called before reset()")
-        base = self.base.act_batch(self._obs)
-        self.venv.step_async(residual_actions(base, np.asarray(actions).reshape(base.shape)))
+        self.venv.step_async(residual_actions(self.base, self._obs, actions))
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, reward, dones, infos = self.venv.step_wait()
-        self._obs = np.asarray(obs)  # after an autoreset, the next episode's first observation: what the next action reads
+        self._obs = np.asarray(
+            obs
+        )  # after an autoreset, the next episode's first observation: what the next action reads
         return obs, reward, dones, infos
