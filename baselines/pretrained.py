@@ -109,7 +109,8 @@ class PretrainedInfo:
         training: how it was trained (pipeline, seed, minutes, vessel-steps, commit, config).
         evaluation: what it measured at export (return, success, reference's return, seeds).
         residual: the network is the learned part of a residual policy (``baselines.residual``): the policy
-            acts with the extrapolating reference's action plus the network's output.
+            acts with the extrapolating reference's action plus the network's output, gated to vanish in
+            formation.
     """
 
     name: str
