@@ -13,8 +13,8 @@ the one a generated team gets), so that its seeds are different starts.
 Each policy is run on every setting of its level that ``check_compatible``
 accepts; a setting it refuses is listed with the reason. A speed-level policy
 trained with the env's integral LOS runs with it everywhere
-(``policy_overrides``): the path follower is part of what it learned on. Per setting, once for
-all policies: the reference's variants that apply there (``reference``;
+(``policy_overrides``): the path follower is part of what it learned on.
+Per setting, once for all policies: the reference's variants that apply there (``reference``;
 ``reference:extrapolate`` over a lossy channel; integral LOS under a current:
 ``ReferencePolicy(integral_los=1)`` at guidance and force,
 ``los_integral_gain = 1`` at speed, where the env steers) and the random

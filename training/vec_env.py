@@ -287,7 +287,6 @@ class ResidualVecEnv(VecEnvWrapper):
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, reward, dones, infos = self.venv.step_wait()
-        self._obs = np.asarray(
-            obs
-        )  # after an autoreset, the next episode's first observation: what the next action reads
+        # after an autoreset, the next episode's first observation: what the next action reads
+        self._obs = np.asarray(obs)
         return obs, reward, dones, infos
